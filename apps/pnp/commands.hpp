@@ -1,0 +1,60 @@
+// The `pnp ua ...` subcommands. Each returns the process exit code (see output.hpp) and
+// throws UsageError / ValueError for a bad command line and client::Error for OPC UA
+// failures (main() turns them into exit codes 2 and 1).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace pnp::cli {
+
+struct ServeOptions {
+    std::uint16_t port = 4840;
+    std::string host = "0.0.0.0";
+    std::vector<std::string> users;  // NAME:PASSWORD
+    bool noAnonymous = false;
+};
+
+// Options every client subcommand takes.
+struct ClientOptions {
+    std::string url;
+    bool json = false;
+    int timeoutMs = 10000;
+    std::string user;  // NAME:PASSWORD, empty: anonymous
+};
+
+struct BrowseOptions {
+    std::string node = "i=85";  // Objects folder
+    int depth = 1;
+};
+
+struct ReadOptions {
+    std::vector<std::string> nodes;
+    std::string attribute = "Value";
+};
+
+struct WriteOptions {
+    std::string node;
+    std::string value;
+    std::string type;  // empty: from the node's DataType and ValueRank
+};
+
+struct CallOptions {
+    std::string object;
+    std::string method;
+    std::vector<std::string> args;
+    std::string types;  // "Int32,Int32": overrides the InputArguments
+};
+
+int runServe(const ServeOptions& options);
+int runEndpoints(const ClientOptions& client);
+int runBrowse(const ClientOptions& client, const BrowseOptions& options);
+int runRead(const ClientOptions& client, const ReadOptions& options);
+int runWrite(const ClientOptions& client, const WriteOptions& options);
+int runCall(const ClientOptions& client, const CallOptions& options);
+
+// "NAME:PASSWORD" -> {NAME, PASSWORD}; throws UsageError.
+std::pair<std::string, std::string> splitUser(const std::string& text);
+
+}  // namespace pnp::cli

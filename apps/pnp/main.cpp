@@ -1,0 +1,152 @@
+// pnp: the command line entry point (CLI11). Exit codes: 0 ok, 1 OPC UA error (the status
+// name is printed), 2 usage error.
+#include <signal.h>
+
+#include <CLI/CLI.hpp>
+#include <iostream>
+
+#include "commands.hpp"
+#include "output.hpp"
+#include "ua/client/error.hpp"
+#include "value_text.hpp"
+
+namespace {
+
+using namespace pnp::cli;
+
+constexpr const char* kNodeHelp =
+    "node: i=85 | ns=2;s=Name | nsu=urn:pnp:demo;s=Demo | /Objects/Server/ServerStatus";
+
+void addClientOptions(CLI::App* cmd, ClientOptions& o) {
+    cmd->add_option("URL", o.url, "server endpoint, e.g. opc.tcp://127.0.0.1:4840")
+        ->required()
+        ->check([](const std::string& s) {
+            return s.starts_with("opc.tcp://") ? std::string()
+                                               : "URL must start with opc.tcp:// (got " + s + ")";
+        });
+    cmd->add_flag("--json", o.json, "print JSON (documented in apps/pnp/README.md)");
+    cmd->add_option("--timeout", o.timeoutMs, "timeout of connect and of each request, in ms")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 3600000));
+    cmd->add_option("--user", o.user, "user name identity NAME:PASSWORD (default: anonymous)");
+}
+
+int uaError(const pnp::ua::client::Error& e, bool json) {
+    std::cerr << "error: " << e.what() << "\n";
+    if (json) {
+        Json j = {{"error",
+                   {{"status", statusText(e.status())},
+                    {"statusCode", e.status().value},
+                    {"message", e.what()}}}};
+        std::cout << j.dump(2) << '\n';
+    }
+    return kExitUaError;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    signal(SIGPIPE, SIG_IGN);  // a closed pipe or socket is an error return, not a signal
+
+    CLI::App app{"pnp — Plug & Produce robot cells on OPC UA", "pnp"};
+    app.require_subcommand(1);
+    app.set_version_flag("--version", "pnp 0.1.0");
+    app.footer("Run `pnp ua --help` for the OPC UA tools.");
+
+    CLI::App* ua = app.add_subcommand("ua", "OPC UA tools: a demo server and a command-line client");
+    ua->require_subcommand(1);
+    ua->footer(
+        "Exit codes: 0 ok, 1 OPC UA error (status name printed), 2 usage error.\n"
+        "Examples:\n"
+        "  pnp ua serve --port 4840 --user operator:secret\n"
+        "  pnp ua browse opc.tcp://127.0.0.1:4840 i=85 --depth 2\n"
+        "  pnp ua read  opc.tcp://127.0.0.1:4840 /Objects/Server/ServerStatus/State\n"
+        "  pnp ua write opc.tcp://127.0.0.1:4840 \"nsu=urn:pnp:demo;s=Array.Int32\" [1,2,3]\n"
+        "  pnp ua call  opc.tcp://127.0.0.1:4840 \"nsu=urn:pnp:demo;s=Demo\" "
+        "\"nsu=urn:pnp:demo;s=Demo.Add\" 2 3");
+
+    ServeOptions serveOpts;
+    CLI::App* serve = ua->add_subcommand(
+        "serve", "run an OPC UA server: namespace 0 + demo namespace urn:pnp:demo");
+    serve->add_option("--port", serveOpts.port, "TCP port (0: any free port)")->capture_default_str();
+    serve->add_option("--host", serveOpts.host, "address to listen on")->capture_default_str();
+    serve->add_option("--user", serveOpts.users, "accept user NAME:PASSWORD (repeatable)");
+    serve->add_flag("--no-anonymous", serveOpts.noAnonymous, "refuse anonymous sessions");
+    serve->footer("Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM.");
+
+    ClientOptions epOpts;
+    CLI::App* endpoints = ua->add_subcommand("endpoints", "list the server's endpoints (GetEndpoints)");
+    addClientOptions(endpoints, epOpts);
+
+    ClientOptions brOpts;
+    BrowseOptions browseOpts;
+    CLI::App* browse = ua->add_subcommand("browse", "list the hierarchical references of a node");
+    addClientOptions(browse, brOpts);
+    browse->add_option("NODE", browseOpts.node, std::string("start ") + kNodeHelp)->capture_default_str();
+    browse->add_option("--depth", browseOpts.depth, "levels to descend")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 64));
+
+    ClientOptions rdOpts;
+    ReadOptions readOpts;
+    CLI::App* read = ua->add_subcommand("read", "read an attribute (default Value) of nodes");
+    addClientOptions(read, rdOpts);
+    read->add_option("NODE", readOpts.nodes, kNodeHelp)->required();
+    read->add_option("--attribute", readOpts.attribute,
+                     "attribute name (Value, DataType, BrowseName, ...) or id")
+        ->capture_default_str();
+
+    ClientOptions wrOpts;
+    WriteOptions writeOpts;
+    CLI::App* write = ua->add_subcommand("write", "write the Value of a variable");
+    addClientOptions(write, wrOpts);
+    write->add_option("NODE", writeOpts.node, kNodeHelp)->required();
+    write->add_option("VALUE", writeOpts.value,
+                      "the value as text; arrays as JSON arrays [1,2,3] (see apps/pnp/README.md)")
+        ->required();
+    write->add_option("--type", writeOpts.type,
+                      "built-in type, e.g. Int32, Double[], LocalizedText (default: the node's "
+                      "DataType and ValueRank)");
+
+    ClientOptions clOpts;
+    CallOptions callOpts;
+    CLI::App* call = ua->add_subcommand("call", "call a method");
+    addClientOptions(call, clOpts);
+    call->add_option("OBJECT", callOpts.object, "the object (or type) owning the method")->required();
+    call->add_option("METHOD", callOpts.method, "the method")->required();
+    call->add_option("ARG", callOpts.args,
+                     "input arguments as text, typed by the method's InputArguments (use -- "
+                     "before arguments that start with '-' and are not numbers)");
+    call->add_option("--types", callOpts.types,
+                     "comma-separated argument types, overriding InputArguments (Int32,Int32)");
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        int rc = app.exit(e);  // help / version to stdout (0), errors to stderr
+        return rc == 0 ? kExitOk : kExitUsage;
+    }
+
+    const bool json = (*endpoints && epOpts.json) || (*browse && brOpts.json) ||
+                      (*read && rdOpts.json) || (*write && wrOpts.json) || (*call && clOpts.json);
+    try {
+        if (*serve) return runServe(serveOpts);
+        if (*endpoints) return runEndpoints(epOpts);
+        if (*browse) return runBrowse(brOpts, browseOpts);
+        if (*read) return runRead(rdOpts, readOpts);
+        if (*write) return runWrite(wrOpts, writeOpts);
+        if (*call) return runCall(clOpts, callOpts);
+    } catch (const UsageError& e) {
+        std::cerr << "error: " << e.what() << "\n";
+        return kExitUsage;
+    } catch (const ValueError& e) {
+        std::cerr << "error: " << e.what() << "\n";
+        return kExitUsage;
+    } catch (const pnp::ua::client::Error& e) {
+        return uaError(e, json);
+    } catch (const std::exception& e) {
+        std::cerr << "error: " << e.what() << "\n";
+        return kExitUaError;
+    }
+    return kExitUsage;
+}

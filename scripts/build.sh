@@ -1,0 +1,97 @@
+#!/usr/bin/env bash
+# Configure (CMake + Ninja) and build.
+#
+#   scripts/build.sh [release]  -> build/       RelWithDebInfo, g++
+#   scripts/build.sh asan       -> build-asan/  Debug, -DPNP_SANITIZE=ON (ASan + UBSan), g++
+#   scripts/build.sh fuzz       -> build-fuzz/  clang >= 16, -DPNP_FUZZ=ON -DPNP_SANITIZE=ON,
+#                                  tests/benchmarks off; builds only the targets under fuzz/
+#                                  (CMake's "fuzz/all"); exits 3 if no usable clang
+#
+# Environment:
+#   PNP_ASAN_COMPILER=gcc|clang  compiler family of the asan build (default gcc, the
+#                                compiler the project's -Werror warnings are tuned for)
+#   PNP_BUILD_JOBS=N             parallel jobs (default: nproc)
+#   PNP_CMAKE_ARGS="..."         extra arguments for the configure step
+#
+# clang 14 (Debian's default clang) is never picked: it cannot compile libstdc++-12's
+# <ranges> views. scripts/setup.sh installs clang-19 + libclang-rt-19-dev.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+MODE="${1:-release}"
+JOBS="${PNP_BUILD_JOBS:-$(nproc)}"
+log() { printf '[build] %s\n' "$*"; }
+
+find_clang() {
+    local v
+    for v in 19 18 17 16; do
+        if command -v "clang++-$v" >/dev/null 2>&1; then
+            CXX_PATH="$(command -v "clang++-$v")"
+            return 0
+        fi
+    done
+    return 1
+}
+
+ARGS=(-G Ninja -DCMAKE_EXPORT_COMPILE_COMMANDS=ON)
+CXX_PATH=""
+TARGET=()
+case "$MODE" in
+    release)
+        DIR="$ROOT/build"
+        ARGS+=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DPNP_SANITIZE=OFF -DPNP_FUZZ=OFF)
+        ;;
+    asan)
+        DIR="$ROOT/build-asan"
+        if [[ "${PNP_ASAN_COMPILER:-gcc}" == "clang" ]]; then
+            if ! find_clang; then
+                echo "[build] ERROR: PNP_ASAN_COMPILER=clang but no clang++-19..16 (run scripts/setup.sh)" >&2
+                exit 1
+            fi
+        else
+            CXX_PATH="$(command -v g++)"
+        fi
+        ARGS+=(-DCMAKE_BUILD_TYPE=Debug -DPNP_SANITIZE=ON -DPNP_FUZZ=OFF)
+        ARGS+=("-DCMAKE_CXX_COMPILER=$CXX_PATH")
+        ;;
+    fuzz)
+        DIR="$ROOT/build-fuzz"
+        if ! find_clang; then
+            echo "[build] no clang++-19..16 found: cannot build libFuzzer targets (run scripts/setup.sh)" >&2
+            exit 3
+        fi
+        ARGS+=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DPNP_SANITIZE=ON -DPNP_FUZZ=ON
+            -DPNP_BUILD_TESTS=OFF -DPNP_BUILD_BENCH=OFF)
+        ARGS+=("-DCMAKE_CXX_COMPILER=$CXX_PATH")
+        TARGET=(--target fuzz/all)
+        ;;
+    *)
+        echo "usage: $0 [release|asan|fuzz]" >&2
+        exit 2
+        ;;
+esac
+
+# A tree configured with another compiler or generator cannot be reconfigured in place.
+if [[ -f "$DIR/CMakeCache.txt" ]]; then
+    stale=0
+    grep -q '^CMAKE_GENERATOR:INTERNAL=Ninja$' "$DIR/CMakeCache.txt" || stale=1
+    if [[ -n "$CXX_PATH" ]] && ! grep -q "^CMAKE_CXX_COMPILER:[A-Z]*=${CXX_PATH}\$" "$DIR/CMakeCache.txt"; then
+        stale=1
+    fi
+    if ((stale)); then
+        log "removing $DIR (configured with another compiler/generator)"
+        rm -rf "$DIR"
+    fi
+fi
+
+# shellcheck disable=SC2206
+EXTRA=(${PNP_CMAKE_ARGS:-})
+log "configure $MODE -> ${DIR#"$ROOT"/} ${CXX_PATH:+(CXX=$CXX_PATH)}"
+cmake -S "$ROOT" -B "$DIR" "${ARGS[@]}" "${EXTRA[@]}"
+log "build $MODE (-j$JOBS)"
+if [[ ${#TARGET[@]} -gt 0 ]] && [[ ! -f "$ROOT/fuzz/CMakeLists.txt" ]]; then
+    log "no fuzz/CMakeLists.txt: nothing to build"
+    exit 0
+fi
+cmake --build "$DIR" -j "$JOBS" "${TARGET[@]}"
+log "ok: $MODE build in ${DIR#"$ROOT"/}"

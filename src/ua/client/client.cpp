@@ -1,0 +1,1234 @@
+#include "ua/client/client.hpp"
+
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <sys/random.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <climits>
+#include <mutex>
+#include <optional>
+#include <thread>
+#include <unordered_map>
+
+#include "ua/client/browse_path.hpp"
+#include "ua/types/ns0_ids.hpp"
+#include "ua/types/status_codes.hpp"
+
+namespace pnp::ua::client {
+
+namespace {
+
+using transport::IncomingResponse;
+using transport::TransportError;
+
+constexpr std::string_view kSecurityPolicyNone = "http://opcfoundation.org/UA/SecurityPolicy#None";
+constexpr UInt32 kNodeRoot = 84;
+constexpr std::size_t kNonceLength = 32;
+
+// Callbacks collected while the lock is held and run after it was released (the object is
+// declared before the lock, so it is destroyed after the lock).
+class Completions {
+public:
+    Completions() = default;
+    Completions(const Completions&) = delete;
+    Completions& operator=(const Completions&) = delete;
+    ~Completions() { run(); }
+
+    void add(std::function<void()> f) { items_.push_back(std::move(f)); }
+    std::size_t run() noexcept {
+        std::size_t n = 0;
+        while (!items_.empty()) {
+            std::vector<std::function<void()>> items;
+            items.swap(items_);
+            for (auto& f : items) {
+                try {
+                    f();
+                } catch (...) {
+                    // Callbacks must not throw; there is nobody to report it to.
+                }
+                ++n;
+            }
+        }
+        return n;
+    }
+
+private:
+    std::vector<std::function<void()>> items_;
+};
+
+bool sessionGone(StatusCode s) {
+    switch (s.code()) {
+        case status::BadSessionIdInvalid.value:
+        case status::BadSessionClosed.value:
+        case status::BadSessionNotActivated.value:
+            return true;
+        default:
+            return false;
+    }
+}
+
+ByteString randomNonce() {
+    ByteString n;
+    n.bytes.resize(kNonceLength);
+    std::size_t got = 0;
+    while (got < kNonceLength) {
+        ssize_t r = ::getrandom(n.bytes.data() + got, kNonceLength - got, 0);
+        if (r <= 0) break;
+        got += static_cast<std::size_t>(r);
+    }
+    return n;
+}
+
+UInt32 timeoutHint(Clock::time_point now, Clock::time_point deadline) {
+    if (deadline == Clock::time_point::max() || deadline <= now) return 0;
+    auto ms = std::chrono::ceil<milliseconds>(deadline - now).count();
+    return ms > static_cast<decltype(ms)>(UINT32_MAX) ? 0 : static_cast<UInt32>(ms);
+}
+
+int pollTimeoutMs(Clock::time_point until) {
+    if (until == Clock::time_point::max()) return -1;
+    auto now = Clock::now();
+    if (until <= now) return 0;
+    auto ms = std::chrono::ceil<milliseconds>(until - now).count();
+    return ms > INT_MAX ? INT_MAX : static_cast<int>(ms);
+}
+
+std::string describe(std::string_view service, const NodeId& node) {
+    return std::string(service) + " of " + node.toString();
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+class Client::Impl {
+public:
+    explicit Impl(ClientConfig c) : config(std::move(c)), backoff(config.reconnect.initialDelay) {}
+    ~Impl() {
+        if (wakeFd >= 0) ::close(wakeFd);
+    }
+
+    struct Session {
+        NodeId sessionId;
+        NodeId authenticationToken;
+        Double revisedTimeout = 0;
+        ByteString serverNonce;
+        std::string anonymousPolicyId = "anonymous";
+        std::string userNamePolicyId = "username";
+    };
+    struct Pending {
+        Clock::time_point deadline;
+        RawCallback callback;
+        std::string_view service;
+    };
+
+    ClientConfig config;
+    mutable std::mutex mutex;
+    std::unique_ptr<transport::ClientConnection> conn;  // null: no channel
+    std::uint64_t generation = 0;                       // of conn, +1 per new channel
+    std::string url;
+    Identity identity;
+    bool wantConnected = false;  // connect() succeeded, disconnect() not called
+    std::optional<Session> session;
+    bool sessionActive = false;
+    bool sessionInvalid = false;  // the server said it forgot the session
+    UInt32 requestHandle = 0;
+    std::unordered_map<UInt32, Pending> pending;
+    Clock::time_point nextAsyncDeadline = Clock::time_point::max();
+    Clock::time_point lastReceive{};
+    Clock::time_point lastSend{};
+    std::vector<std::string> namespaces;
+    ClientStats stats;
+
+    // reconnect back-off (background / runIterate)
+    Clock::time_point nextReconnect{};
+    milliseconds backoff;
+
+    // background thread
+    std::thread thread;
+    bool stopRequested = false;
+    int wakeFd = -1;
+
+    // ---- helpers (all with the mutex held) ----------------------------------------------
+
+    transport::ClientConfig transportConfig() const {
+        transport::ClientConfig t = config.transport;
+        t.requestedLifetime = config.secureChannelLifetime;
+        return t;
+    }
+
+    RequestHeader makeHeader(Clock::time_point now, Clock::time_point deadline) {
+        RequestHeader h{};
+        if (session) h.authenticationToken = session->authenticationToken;
+        h.timestamp = DateTime::now();
+        h.requestHandle = ++requestHandle;
+        h.timeoutHint = timeoutHint(now, deadline);
+        return h;
+    }
+
+    void wake() const {
+        if (wakeFd >= 0) {
+            std::uint64_t one = 1;
+            [[maybe_unused]] auto r = ::write(wakeFd, &one, sizeof one);
+        }
+    }
+
+    void ensureWakeFd() {
+        if (wakeFd < 0) wakeFd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+    }
+
+    void notePossibleSessionLoss(const IncomingResponse& m) {
+        if (!detail::isNs0Numeric(m.typeId, DataTypeInfo<ServiceFault>::binaryEncodingId)) return;
+        try {
+            auto fault = decodeFromBuffer<ServiceFault>(m.body.data(), m.body.size(), false,
+                                                        config.decodeLimits);
+            if (sessionGone(fault.responseHeader.serviceResult)) sessionInvalid = true;
+        } catch (const DecodeError&) {
+        }
+    }
+
+    // A response that is not the one a blocking call waits for.
+    void route(IncomingResponse&& m, Completions& done) {
+        auto it = pending.find(m.requestId);
+        if (it == pending.end()) {
+            ++stats.discardedResponses;
+            return;
+        }
+        notePossibleSessionLoss(m);
+        done.add([cb = std::move(it->second.callback), r = std::move(m)]() mutable {
+            cb(Result<IncomingResponse>(std::move(r)));
+        });
+        pending.erase(it);
+    }
+
+    void expireAsync(Clock::time_point now, Completions& done) {
+        if (now < nextAsyncDeadline) return;
+        nextAsyncDeadline = Clock::time_point::max();
+        for (auto it = pending.begin(); it != pending.end();) {
+            if (it->second.deadline <= now) {
+                ++stats.timeouts;
+                done.add([cb = std::move(it->second.callback), s = it->second.service] {
+                    cb(Error(status::BadTimeout, std::string(s) + " timed out"));
+                });
+                it = pending.erase(it);
+            } else {
+                nextAsyncDeadline = std::min(nextAsyncDeadline, it->second.deadline);
+                ++it;
+            }
+        }
+    }
+
+    void failPending(StatusCode s, std::string_view why, Completions& done) {
+        for (auto& [id, p] : pending) {
+            done.add([cb = std::move(p.callback), s, msg = std::string(p.service) + ": " +
+                                                          std::string(why)] {
+                cb(Error(s, msg));
+            });
+        }
+        pending.clear();
+        nextAsyncDeadline = Clock::time_point::max();
+    }
+
+    void dropConnection() {
+        if (!conn) return;
+        try {
+            conn->close();
+        } catch (...) {
+        }
+        conn.reset();
+        sessionActive = false;
+    }
+
+    void connectionLost(StatusCode s, Completions& done) {
+        dropConnection();
+        ++stats.connectionsLost;
+        failPending(s, "connection lost", done);
+        nextReconnect = Clock::now();
+        backoff = config.reconnect.initialDelay;
+    }
+
+    // Waits for the response with requestId `id`, routing others.
+    IncomingResponse await(UInt32 id, Clock::time_point deadline, std::string_view service,
+                           Completions& done) {
+        for (;;) {
+            std::optional<IncomingResponse> m = conn->receive(std::min(deadline, nextAsyncDeadline));
+            Clock::time_point now = Clock::now();
+            if (!m) {
+                if (now >= deadline) {
+                    ++stats.timeouts;
+                    throw Error(status::BadTimeout, std::string(service) + " timed out");
+                }
+                expireAsync(now, done);
+                continue;
+            }
+            lastReceive = now;
+            if (m->requestId == id) return std::move(*m);
+            route(std::move(*m), done);
+        }
+    }
+
+    // One request on the current connection, no reconnect. TransportError passes through.
+    IncomingResponse exchange(Client::EncodeRef encode, Clock::time_point deadline,
+                              std::string_view service, Completions& done, bool& sent) {
+        Clock::time_point now = Clock::now();
+        Buffer buffer = transport::ClientConnection::newMessageBuffer();
+        encode(buffer, makeHeader(now, deadline));
+        UInt32 id = conn->send(std::move(buffer), deadline);
+        sent = true;
+        ++stats.requestsSent;
+        lastSend = now;
+        return await(id, deadline, service, done);
+    }
+
+    // A session-management request: a transport failure drops the connection.
+    template <class Req>
+    ResponseOf<Req> sessionCall(Req& req, Clock::time_point deadline, Completions& done) {
+        constexpr std::string_view service = detail::serviceName<Req>();
+        if (!conn) throw Error(status::BadNotConnected, std::string(service) + ": not connected");
+        bool sent = false;
+        try {
+            IncomingResponse r = exchange(encoderFor(req), deadline, service, done, sent);
+            return decodeIncoming<ResponseOf<Req>>(r, service, config.decodeLimits);
+        } catch (const TransportError& e) {
+            connectionLost(e.status(), done);
+            throw Error(e.status(), std::string(service) + ": " + e.what());
+        }
+    }
+
+    void openChannel(Clock::time_point deadline) {
+        try {
+            conn = transport::ClientConnection::connect(url, transportConfig(), deadline);
+            ++generation;
+        } catch (const TransportError& e) {
+            throw Error(e.status(), "cannot connect to " + url + ": " + e.what());
+        }
+        lastReceive = Clock::now();
+    }
+
+    void createSession(Clock::time_point deadline, Completions& done) {
+        CreateSessionRequest req{};
+        req.clientDescription.applicationUri = config.applicationUri;
+        req.clientDescription.productUri = config.productUri;
+        req.clientDescription.applicationName = LocalizedText("", config.applicationName);
+        req.clientDescription.applicationType = ApplicationType::Client;
+        req.endpointUrl = url;
+        req.sessionName =
+            config.sessionName.empty() ? config.applicationName + " session" : config.sessionName;
+        req.clientNonce = randomNonce();
+        req.requestedSessionTimeout = static_cast<Double>(config.requestedSessionTimeout.count());
+        req.maxResponseMessageSize = config.transport.maxMessageSize;
+        session.reset();
+        sessionActive = false;
+        CreateSessionResponse resp = sessionCall(req, deadline, done);
+
+        Session s;
+        s.sessionId = std::move(resp.sessionId);
+        s.authenticationToken = std::move(resp.authenticationToken);
+        s.revisedTimeout = resp.revisedSessionTimeout;
+        s.serverNonce = std::move(resp.serverNonce);
+        choosePolicies(resp.serverEndpoints, s);
+        session = std::move(s);
+        sessionInvalid = false;
+        namespaces.clear();  // possibly another server (instance)
+        ++stats.sessionsCreated;
+    }
+
+    static void choosePolicies(const std::vector<EndpointDescription>& endpoints, Session& s) {
+        bool anonymous = false, user = false;
+        for (const auto& ep : endpoints) {
+            if (!ep.securityPolicyUri.empty() && ep.securityPolicyUri != kSecurityPolicyNone)
+                continue;
+            for (const auto& t : ep.userIdentityTokens) {
+                bool plain = t.securityPolicyUri.empty() || t.securityPolicyUri == kSecurityPolicyNone;
+                if (!anonymous && t.tokenType == UserTokenType::Anonymous) {
+                    s.anonymousPolicyId = t.policyId;
+                    anonymous = true;
+                } else if (!user && plain && t.tokenType == UserTokenType::UserName) {
+                    s.userNamePolicyId = t.policyId;
+                    user = true;
+                }
+            }
+        }
+    }
+
+    ExtensionObject identityToken() const {
+        if (const auto* u = std::get_if<UserName>(&identity)) {
+            UserNameIdentityToken t{};
+            t.policyId = session->userNamePolicyId;
+            t.userName = u->user;
+            t.password = ByteString(u->password);
+            return toExtensionObject(t);
+        }
+        AnonymousIdentityToken t{};
+        t.policyId = session->anonymousPolicyId;
+        return toExtensionObject(t);
+    }
+
+    void activateSession(Clock::time_point deadline, Completions& done) {
+        ActivateSessionRequest req{};
+        req.localeIds = config.localeIds;
+        req.userIdentityToken = identityToken();
+        ActivateSessionResponse resp = sessionCall(req, deadline, done);
+        session->serverNonce = std::move(resp.serverNonce);
+        sessionActive = true;
+        sessionInvalid = false;
+    }
+
+    // New channel + the existing session re-activated, or a new session.
+    void reconnect(Clock::time_point deadline, Completions& done) {
+        deadline = std::min(deadline, Clock::now() + config.connectTimeout);
+        dropConnection();
+        openChannel(deadline);
+        try {
+            if (session) {
+                try {
+                    activateSession(deadline, done);
+                    ++stats.sessionsReactivated;
+                    ++stats.reconnects;
+                    return;
+                } catch (const Error& e) {
+                    if (!conn || !sessionGone(e.status())) throw;
+                }
+            }
+            createSession(deadline, done);
+            activateSession(deadline, done);
+            ++stats.reconnects;
+        } catch (...) {
+            dropConnection();
+            throw;
+        }
+    }
+
+    // The server forgot the session while the channel stayed up.
+    void renewSession(Clock::time_point deadline, Completions& done) {
+        deadline = std::min(deadline, Clock::now() + config.connectTimeout);
+        createSession(deadline, done);
+        activateSession(deadline, done);
+    }
+
+    // A connection that was idle for a while may have been closed by the server: look at the
+    // socket before using it.
+    void checkIdleConnection(Clock::time_point now, Completions& done) {
+        if (config.idleCheckAfter.count() <= 0 || now - lastReceive < config.idleCheckAfter)
+            return;
+        pollfd p{conn->nativeHandle(), POLLIN | POLLRDHUP, 0};
+        if (::poll(&p, 1, 0) <= 0 || p.revents == 0) return;
+        try {
+            while (auto m = conn->receive(now)) route(std::move(*m), done);
+        } catch (const TransportError& e) {
+            connectionLost(e.status(), done);
+            return;
+        }
+        if (p.revents & (POLLERR | POLLHUP | POLLRDHUP | POLLNVAL))
+            connectionLost(status::BadConnectionClosed, done);
+    }
+
+    // Makes sure there is a channel and an active session, reconnecting if allowed.
+    void ensureReady(Clock::time_point deadline, std::string_view service, Completions& done) {
+        if (!wantConnected)
+            throw Error(status::BadNotConnected, std::string(service) + ": not connected");
+        if (conn) checkIdleConnection(Clock::now(), done);
+        if (!conn) {
+            if (!config.reconnect.enabled)
+                throw Error(status::BadNotConnected,
+                            std::string(service) + ": connection lost (reconnect disabled)");
+            reconnect(deadline, done);
+        } else if (sessionInvalid || !sessionActive) {
+            renewSession(deadline, done);
+        }
+    }
+
+    static bool isSessionFault(const IncomingResponse& r, const DecodeLimits& limits) {
+        if (!detail::isNs0Numeric(r.typeId, DataTypeInfo<ServiceFault>::binaryEncodingId))
+            return false;
+        try {
+            auto f = decodeFromBuffer<ServiceFault>(r.body.data(), r.body.size(), false, limits);
+            return sessionGone(f.responseHeader.serviceResult);
+        } catch (const DecodeError&) {
+            return false;
+        }
+    }
+
+    IncomingResponse roundTrip(Client::EncodeRef encode, bool idempotent,
+                               Clock::time_point deadline, std::string_view service,
+                               Completions& done) {
+        for (int attempt = 0;; ++attempt) {
+            ensureReady(deadline, service, done);
+            bool sent = false;
+            try {
+                IncomingResponse r = exchange(encode, deadline, service, done, sent);
+                if (attempt == 0 && config.reconnect.enabled &&
+                    isSessionFault(r, config.decodeLimits)) {
+                    // The server rejected the request without executing it: a new session
+                    // and one more try, whatever the service.
+                    sessionInvalid = true;
+                    ++stats.retries;
+                    continue;
+                }
+                if (!pending.empty()) wake();  // responses may be buffered in the transport
+                return r;
+            } catch (const TransportError& e) {
+                if (e.status() == status::BadRequestTooLarge && conn && conn->isOpen())
+                    throw Error(e.status(), std::string(service) + ": " + e.what());
+                connectionLost(e.status(), done);
+                bool retry = attempt == 0 && config.reconnect.enabled &&
+                             (!sent || (idempotent && config.reconnect.retryIdempotent));
+                if (!retry) throw Error(e.status(), std::string(service) + ": " + e.what());
+                ++stats.retries;
+            }
+        }
+    }
+
+    void sendAsync(Client::EncodeRef encode, Clock::time_point deadline, std::string_view service,
+                   RawCallback& callback, Completions& done) {
+        for (int attempt = 0;; ++attempt) {
+            ensureReady(deadline, service, done);
+            try {
+                Clock::time_point now = Clock::now();
+                Buffer buffer = transport::ClientConnection::newMessageBuffer();
+                encode(buffer, makeHeader(now, deadline));
+                UInt32 id = conn->send(std::move(buffer), deadline);
+                ++stats.requestsSent;
+                lastSend = now;
+                pending.insert_or_assign(id, Pending{deadline, std::move(callback), service});
+                nextAsyncDeadline = std::min(nextAsyncDeadline, deadline);
+                wake();
+                return;
+            } catch (const TransportError& e) {
+                if (e.status() == status::BadRequestTooLarge && conn && conn->isOpen())
+                    throw Error(e.status(), std::string(service) + ": " + e.what());
+                connectionLost(e.status(), done);
+                // Not sent: safe to send again on a new connection.
+                if (attempt > 0 || !config.reconnect.enabled)
+                    throw Error(e.status(), std::string(service) + ": " + e.what());
+                ++stats.retries;
+            }
+        }
+    }
+
+    Clock::duration keepAliveInterval() const {
+        if (config.keepAliveInterval.count() > 0) return config.keepAliveInterval;
+        if (!session || session->revisedTimeout <= 0) return Clock::duration::max();
+        return std::chrono::duration_cast<Clock::duration>(
+            std::chrono::duration<double, std::milli>(session->revisedTimeout / 3));
+    }
+
+    void sendKeepAlive(Clock::time_point now, Completions& done) {
+        ReadRequest req{};
+        req.maxAge = 0;
+        req.timestampsToReturn = TimestampsToReturn::Neither;
+        ReadValueId id{};
+        id.nodeId = NodeId(0, ns0::Server_ServerStatus_CurrentTime);
+        id.attributeId = static_cast<UInt32>(AttributeId::Value);
+        req.nodesToRead.push_back(std::move(id));
+        RawCallback cb = [](Result<IncomingResponse>) {};
+        ++stats.keepAlives;
+        try {
+            sendAsync(encoderFor(req), now + config.requestTimeout, "KeepAlive", cb, done);
+        } catch (const Error&) {
+        }
+    }
+
+    // One pass of the event loop: returns when the loop should run again at the latest.
+    Clock::time_point housekeeping(Completions& done) {
+        Clock::time_point now = Clock::now();
+        expireAsync(now, done);
+        if (wantConnected && config.reconnect.enabled && (!conn || sessionInvalid) &&
+            now >= nextReconnect) {
+            try {
+                if (!conn)
+                    reconnect(now + config.connectTimeout, done);
+                else
+                    renewSession(now + config.connectTimeout, done);
+                backoff = config.reconnect.initialDelay;
+            } catch (const Error&) {
+                nextReconnect = Clock::now() + backoff;
+                backoff = std::min<milliseconds>(backoff * 2, config.reconnect.maxDelay);
+            }
+            now = Clock::now();
+        }
+        if (conn) {
+            try {
+                while (auto m = conn->receive(now)) {
+                    lastReceive = now;
+                    route(std::move(*m), done);
+                }
+                conn->renewIfDue();
+            } catch (const TransportError& e) {
+                connectionLost(e.status(), done);
+            }
+        }
+        Clock::time_point next = now + std::chrono::seconds(1);
+        if (conn) next = std::min(next, std::max(now, conn->renewalDue()));
+        if (conn && sessionActive) {
+            Clock::duration ka = keepAliveInterval();
+            if (ka != Clock::duration::max()) {
+                if (now - lastSend >= ka) {
+                    sendKeepAlive(now, done);
+                    next = std::min(next, now + ka);
+                } else {
+                    next = std::min(next, lastSend + ka);
+                }
+            }
+        }
+        if (wantConnected && !conn && config.reconnect.enabled)
+            next = std::min(next, std::max(now, nextReconnect));
+        return std::min(next, nextAsyncDeadline);
+    }
+
+    // Waits (without the lock) until the socket has `events` or the wake-up eventfd is
+    // readable, or until `until`. Returns the socket's revents.
+    short waitForEvents(int fd, short events, Clock::time_point until) {
+        pollfd fds[2] = {{wakeFd, POLLIN, 0}, {fd, events, 0}};
+        if (::poll(fds, fd >= 0 ? 2 : 1, pollTimeoutMs(until)) <= 0) return 0;
+        if (fds[0].revents & POLLIN) {
+            std::uint64_t v;
+            [[maybe_unused]] auto r = ::read(wakeFd, &v, sizeof v);
+        }
+        return fd >= 0 ? fds[1].revents : 0;
+    }
+
+    // The peer hung up connection `gen` (seen by poll): make sure it is treated as lost even
+    // if nothing can be read from it.
+    void peerHungUp(std::uint64_t gen, Completions& done) {
+        if (!conn || gen != generation) return;
+        try {
+            while (auto m = conn->receive(Clock::now())) route(std::move(*m), done);
+        } catch (const TransportError& e) {
+            connectionLost(e.status(), done);
+            return;
+        }
+        connectionLost(status::BadConnectionClosed, done);
+    }
+
+    // The background thread. It watches the socket for a hang-up always, and for incoming
+    // data only while async requests are pending (so that blocking calls, which read their
+    // responses themselves, do not wake it).
+    void backgroundLoop() {
+        short hangup = 0;
+        std::uint64_t watched = 0;
+        for (;;) {
+            Completions done;
+            Clock::time_point until;
+            int fd = -1;
+            short events = 0;
+            {
+                std::lock_guard lock(mutex);
+                if (stopRequested) return;
+                if (hangup) peerHungUp(watched, done);
+                until = housekeeping(done);
+                if (conn) {
+                    fd = conn->nativeHandle();
+                    events = pending.empty() ? POLLRDHUP : (POLLIN | POLLRDHUP);
+                    watched = generation;
+                }
+            }
+            done.run();
+            hangup = waitForEvents(fd, events, until) & (POLLRDHUP | POLLHUP | POLLERR);
+        }
+    }
+
+    void close(Completions& done) {
+        wantConnected = false;
+        if (conn && session && sessionActive) {
+            try {
+                CloseSessionRequest req{};
+                req.deleteSubscriptions = true;
+                sessionCall(req, Clock::now() + config.closeTimeout, done);
+            } catch (...) {
+            }
+        }
+        dropConnection();
+        session.reset();
+        sessionActive = false;
+        sessionInvalid = false;
+        namespaces.clear();
+        failPending(status::BadShutdown, "client disconnected", done);
+    }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+Client::Client(ClientConfig config) : impl_(std::make_unique<Impl>(std::move(config))) {}
+
+Client::~Client() {
+    if (!impl_) return;
+    stopBackgroundThread();
+    disconnect();
+}
+
+Client::Client(Client&&) noexcept = default;
+
+Client& Client::operator=(Client&& o) noexcept {
+    if (this != &o) {
+        if (impl_) {
+            stopBackgroundThread();
+            disconnect();
+        }
+        impl_ = std::move(o.impl_);
+    }
+    return *this;
+}
+
+const ClientConfig& Client::config() const { return impl_->config; }
+const DecodeLimits& Client::decodeLimits() const { return impl_->config.decodeLimits; }
+
+void Client::connect(std::string_view endpointUrl, Identity identity, Deadline deadline) {
+    Impl& s = *impl_;
+    Completions done;
+    std::lock_guard lock(s.mutex);
+    if (s.wantConnected || s.conn) s.close(done);
+    Clock::time_point dl = deadline.resolve(Clock::now(), s.config.connectTimeout);
+    s.url = std::string(endpointUrl);
+    s.identity = std::move(identity);
+    try {
+        s.openChannel(dl);
+        s.createSession(dl, done);
+        s.activateSession(dl, done);
+    } catch (...) {
+        s.dropConnection();
+        s.session.reset();
+        throw;
+    }
+    s.wantConnected = true;
+    s.backoff = s.config.reconnect.initialDelay;
+}
+
+void Client::disconnect() noexcept {
+    if (!impl_) return;
+    Completions done;
+    std::lock_guard lock(impl_->mutex);
+    impl_->close(done);
+}
+
+bool Client::isConnected() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->wantConnected;
+}
+
+bool Client::isChannelOpen() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->conn && impl_->conn->isOpen();
+}
+
+std::string Client::endpointUrl() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->url;
+}
+
+NodeId Client::sessionId() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->session ? impl_->session->sessionId : NodeId();
+}
+
+Double Client::sessionTimeout() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->session ? impl_->session->revisedTimeout : 0;
+}
+
+int Client::nativeHandle() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->conn ? impl_->conn->nativeHandle() : -1;
+}
+
+ClientStats Client::stats() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->stats;
+}
+
+// ---- engine ------------------------------------------------------------------------------
+
+IncomingResponse Client::roundTrip(EncodeRef encode, bool idempotent, Deadline deadline,
+                                   std::string_view service) {
+    Impl& s = *impl_;
+    Completions done;
+    std::lock_guard lock(s.mutex);
+    Clock::time_point dl = deadline.resolve(Clock::now(), s.config.requestTimeout);
+    return s.roundTrip(encode, idempotent, dl, service, done);
+}
+
+void Client::sendAsync(EncodeRef encode, Deadline deadline, std::string_view service,
+                       RawCallback callback) {
+    Impl& s = *impl_;
+    Completions done;
+    std::lock_guard lock(s.mutex);
+    Clock::time_point dl = deadline.resolve(Clock::now(), s.config.requestTimeout);
+    try {
+        s.sendAsync(encode, dl, service, callback, done);
+    } catch (const Error& e) {
+        done.add([cb = std::move(callback), e] { cb(e); });
+    }
+}
+
+IncomingResponse Client::discoveryRoundTrip(std::string_view url, EncodeRef encode,
+                                            Deadline deadline, std::string_view service) {
+    Impl& s = *impl_;
+    Clock::time_point dl;
+    {
+        Completions done;
+        std::lock_guard lock(s.mutex);
+        dl = deadline.resolve(Clock::now(), s.config.requestTimeout);
+        if (url.empty() || (s.wantConnected && url == s.url)) {
+            if (!s.wantConnected)
+                throw Error(status::BadNotConnected,
+                            std::string(service) + ": not connected and no URL given");
+            return s.roundTrip(encode, true, dl, service, done);
+        }
+    }
+    // A temporary connection, without a session and without the client's lock.
+    try {
+        auto c = transport::ClientConnection::connect(std::string(url), s.config.transport, dl);
+        Clock::time_point now = Clock::now();
+        Buffer buffer = transport::ClientConnection::newMessageBuffer();
+        RequestHeader h{};
+        h.timestamp = DateTime::now();
+        h.requestHandle = 1;
+        h.timeoutHint = timeoutHint(now, dl);
+        encode(buffer, std::move(h));
+        UInt32 id = c->send(std::move(buffer), dl);
+        for (;;) {
+            auto m = c->receive(dl);
+            if (!m) throw Error(status::BadTimeout, std::string(service) + " timed out");
+            if (m->requestId == id) {
+                c->close();
+                return std::move(*m);
+            }
+        }
+    } catch (const TransportError& e) {
+        throw Error(e.status(), std::string(service) + " at " + std::string(url) + ": " + e.what());
+    }
+}
+
+// ---- discovery -----------------------------------------------------------------------------
+
+std::vector<EndpointDescription> Client::getEndpoints(std::string_view url, Deadline deadline) {
+    GetEndpointsRequest req{};
+    {
+        std::lock_guard lock(impl_->mutex);
+        req.endpointUrl = url.empty() ? impl_->url : std::string(url);
+    }
+    auto r = discoveryRoundTrip(url, encoderFor(req), deadline, "GetEndpoints");
+    return decodeIncoming<GetEndpointsResponse>(r, "GetEndpoints", decodeLimits()).endpoints;
+}
+
+std::vector<ApplicationDescription> Client::findServers(std::string_view url, Deadline deadline) {
+    FindServersRequest req{};
+    {
+        std::lock_guard lock(impl_->mutex);
+        req.endpointUrl = url.empty() ? impl_->url : std::string(url);
+    }
+    auto r = discoveryRoundTrip(url, encoderFor(req), deadline, "FindServers");
+    return decodeIncoming<FindServersResponse>(r, "FindServers", decodeLimits()).servers;
+}
+
+// ---- view ----------------------------------------------------------------------------------
+
+std::vector<BrowseResult> Client::browse(std::vector<BrowseDescription> nodes,
+                                         UInt32 maxReferencesPerNode, Deadline deadline) {
+    BrowseRequest req{};
+    req.requestedMaxReferencesPerNode = maxReferencesPerNode;
+    req.nodesToBrowse = std::move(nodes);
+    return request(std::move(req), deadline).results;
+}
+
+BrowseResult Client::browse(const BrowseDescription& node, UInt32 maxReferencesPerNode,
+                            Deadline deadline) {
+    auto results = browse(std::vector<BrowseDescription>{node}, maxReferencesPerNode, deadline);
+    if (results.size() != 1)
+        throw Error(status::BadUnexpectedError, "Browse: expected one result");
+    return std::move(results.front());
+}
+
+std::vector<ReferenceDescription> Client::browse(const NodeId& node, const BrowseOptions& options,
+                                                 Deadline deadline) {
+    Clock::time_point dl = deadline.resolve(Clock::now(), config().requestTimeout);
+    BrowseDescription d{};
+    d.nodeId = node;
+    d.browseDirection = options.direction;
+    d.referenceTypeId = options.referenceTypeId;
+    d.includeSubtypes = options.includeSubtypes;
+    d.nodeClassMask = options.nodeClassMask;
+    d.resultMask = options.resultMask;
+    BrowseResult r = browse(d, options.maxReferencesPerNode, dl);
+    std::vector<ReferenceDescription> refs = std::move(r.references);
+    for (;;) {
+        if (r.statusCode.isBad()) {
+            if (!r.continuationPoint.empty()) {
+                try {
+                    browseNext(r.continuationPoint, true, dl);
+                } catch (const Error&) {
+                }
+            }
+            throw Error(r.statusCode, describe("Browse", node));
+        }
+        if (r.continuationPoint.empty()) return refs;
+        r = browseNext(r.continuationPoint, false, dl);
+        for (auto& ref : r.references) refs.push_back(std::move(ref));
+    }
+}
+
+std::vector<BrowseResult> Client::browseNext(std::vector<ByteString> continuationPoints,
+                                             bool release, Deadline deadline) {
+    BrowseNextRequest req{};
+    req.releaseContinuationPoints = release;
+    req.continuationPoints = std::move(continuationPoints);
+    return request(std::move(req), deadline).results;
+}
+
+BrowseResult Client::browseNext(const ByteString& continuationPoint, bool release,
+                                Deadline deadline) {
+    auto results = browseNext(std::vector<ByteString>{continuationPoint}, release, deadline);
+    if (results.size() != 1)
+        throw Error(status::BadUnexpectedError, "BrowseNext: expected one result");
+    return std::move(results.front());
+}
+
+std::vector<BrowsePathResult> Client::translateBrowsePaths(std::vector<BrowsePath> paths,
+                                                           Deadline deadline) {
+    TranslateBrowsePathsToNodeIdsRequest req{};
+    req.browsePaths = std::move(paths);
+    return request(std::move(req), deadline).results;
+}
+
+NodeId Client::resolve(std::string_view path, Deadline deadline) {
+    return resolve(NodeId(0, kNodeRoot), path, deadline);
+}
+
+NodeId Client::resolve(const NodeId& start, std::string_view path, Deadline deadline) {
+    Clock::time_point dl = deadline.resolve(Clock::now(), config().requestTimeout);
+    BrowsePath bp{};
+    bp.startingNode = start;
+    bp.relativePath =
+        parseRelativePath(path, [&](std::string_view uri) { return namespaceIndex(uri, dl); });
+    auto results = translateBrowsePaths({std::move(bp)}, dl);
+    if (results.size() != 1)
+        throw Error(status::BadUnexpectedError, "TranslateBrowsePaths: expected one result");
+    const BrowsePathResult& r = results.front();
+    std::string what = "resolve \"" + std::string(path) + "\"";
+    if (r.statusCode.isBad()) throw Error(r.statusCode, what);
+    for (const auto& t : r.targets) {
+        if (t.remainingPathIndex != UINT32_MAX) continue;  // only partly followed
+        if (t.targetId.serverIndex != 0) continue;
+        if (t.targetId.namespaceUri.empty()) return t.targetId.nodeId;
+        return toNodeId(t.targetId, dl);
+    }
+    throw Error(status::BadNoMatch, what);
+}
+
+std::vector<NodeId> Client::registerNodes(std::vector<NodeId> nodes, Deadline deadline) {
+    RegisterNodesRequest req{};
+    req.nodesToRegister = std::move(nodes);
+    return request(std::move(req), deadline).registeredNodeIds;
+}
+
+void Client::unregisterNodes(std::vector<NodeId> nodes, Deadline deadline) {
+    UnregisterNodesRequest req{};
+    req.nodesToUnregister = std::move(nodes);
+    request(std::move(req), deadline);
+}
+
+// ---- attributes ----------------------------------------------------------------------------
+
+std::vector<DataValue> Client::read(std::vector<ReadValueId> nodes, Deadline deadline) {
+    return read(std::move(nodes), TimestampsToReturn::Both, deadline);
+}
+
+std::vector<DataValue> Client::read(std::vector<ReadValueId> nodes, TimestampsToReturn timestamps,
+                                    Deadline deadline) {
+    ReadRequest req{};
+    req.maxAge = 0;
+    req.timestampsToReturn = timestamps;
+    req.nodesToRead = std::move(nodes);
+    std::size_t n = req.nodesToRead.size();
+    auto results = request(std::move(req), deadline).results;
+    if (results.size() != n)
+        throw Error(status::BadUnexpectedError, "Read: result count does not match the request");
+    return results;
+}
+
+namespace {
+ReadRequest singleRead(const NodeId& node, AttributeId attribute, TimestampsToReturn ts) {
+    ReadRequest req{};
+    req.maxAge = 0;
+    req.timestampsToReturn = ts;
+    ReadValueId id{};
+    id.nodeId = node;
+    id.attributeId = static_cast<UInt32>(attribute);
+    req.nodesToRead.push_back(std::move(id));
+    return req;
+}
+
+DataValue singleResult(ReadResponse&& resp) {
+    if (resp.results.size() != 1)
+        throw Error(status::BadUnexpectedError, "Read: expected one result");
+    return std::move(resp.results.front());
+}
+
+Variant valueOf(DataValue&& dv, const NodeId& node) {
+    StatusCode s = dv.statusOrGood();
+    if (s.isBad()) throw Error(s, describe("Read", node));
+    return dv.value ? std::move(*dv.value) : Variant();
+}
+
+WriteRequest singleWrite(const NodeId& node, AttributeId attribute, DataValue value) {
+    WriteRequest req{};
+    WriteValue w{};
+    w.nodeId = node;
+    w.attributeId = static_cast<UInt32>(attribute);
+    w.value = std::move(value);
+    req.nodesToWrite.push_back(std::move(w));
+    return req;
+}
+
+StatusCode singleStatus(WriteResponse&& resp) {
+    if (resp.results.size() != 1)
+        throw Error(status::BadUnexpectedError, "Write: expected one result");
+    return resp.results.front();
+}
+
+CallRequest singleCall(const NodeId& object, const NodeId& method, std::vector<Variant> inputs) {
+    CallRequest req{};
+    CallMethodRequest m{};
+    m.objectId = object;
+    m.methodId = method;
+    m.inputArguments = std::move(inputs);
+    req.methodsToCall.push_back(std::move(m));
+    return req;
+}
+
+CallResult callResultOf(CallResponse&& resp) {
+    if (resp.results.size() != 1)
+        throw Error(status::BadUnexpectedError, "Call: expected one result");
+    CallMethodResult& r = resp.results.front();
+    return CallResult{r.statusCode, std::move(r.inputArgumentResults),
+                      std::move(r.outputArguments)};
+}
+}  // namespace
+
+DataValue Client::readAttribute(const NodeId& node, AttributeId attribute, Deadline deadline) {
+    return singleResult(request(singleRead(node, attribute, TimestampsToReturn::Both), deadline));
+}
+
+Variant Client::readValue(const NodeId& node, Deadline deadline) {
+    return valueOf(
+        singleResult(request(singleRead(node, AttributeId::Value, TimestampsToReturn::Neither),
+                             deadline)),
+        node);
+}
+
+std::vector<StatusCode> Client::write(std::vector<WriteValue> nodes, Deadline deadline) {
+    WriteRequest req{};
+    req.nodesToWrite = std::move(nodes);
+    return request(std::move(req), deadline).results;
+}
+
+StatusCode Client::writeAttribute(const NodeId& node, AttributeId attribute, DataValue value,
+                                  Deadline deadline) {
+    return singleStatus(request(singleWrite(node, attribute, std::move(value)), deadline));
+}
+
+StatusCode Client::writeValue(const NodeId& node, Variant value, Deadline deadline) {
+    return singleStatus(
+        request(singleWrite(node, AttributeId::Value, DataValue(std::move(value))), deadline));
+}
+
+// ---- methods -------------------------------------------------------------------------------
+
+std::vector<CallMethodResult> Client::call(std::vector<CallMethodRequest> calls,
+                                           Deadline deadline) {
+    CallRequest req{};
+    req.methodsToCall = std::move(calls);
+    return request(std::move(req), deadline).results;
+}
+
+CallResult Client::call(const NodeId& object, const NodeId& method, std::vector<Variant> inputs,
+                        Deadline deadline) {
+    return callResultOf(request(singleCall(object, method, std::move(inputs)), deadline));
+}
+
+// ---- async convenience -----------------------------------------------------------------------
+
+void Client::readAsync(std::vector<ReadValueId> nodes,
+                       std::function<void(Result<std::vector<DataValue>>)> callback,
+                       Deadline deadline) {
+    ReadRequest req{};
+    req.maxAge = 0;
+    req.timestampsToReturn = TimestampsToReturn::Both;
+    req.nodesToRead = std::move(nodes);
+    requestAsync(
+        std::move(req),
+        [cb = std::move(callback)](Result<ReadResponse> r) {
+            if (!r.ok())
+                cb(*r.error());
+            else
+                cb(std::move(r.value().results));
+        },
+        deadline);
+}
+
+void Client::readValueAsync(const NodeId& node, std::function<void(Result<Variant>)> callback,
+                            Deadline deadline) {
+    requestAsync(
+        singleRead(node, AttributeId::Value, TimestampsToReturn::Neither),
+        [cb = std::move(callback), node](Result<ReadResponse> r) {
+            auto result = [&]() -> Result<Variant> {
+                if (!r.ok()) return *r.error();
+                try {
+                    return valueOf(singleResult(std::move(r.value())), node);
+                } catch (const Error& e) {
+                    return e;
+                }
+            }();
+            cb(std::move(result));
+        },
+        deadline);
+}
+
+void Client::writeAsync(std::vector<WriteValue> nodes,
+                        std::function<void(Result<std::vector<StatusCode>>)> callback,
+                        Deadline deadline) {
+    WriteRequest req{};
+    req.nodesToWrite = std::move(nodes);
+    requestAsync(
+        std::move(req),
+        [cb = std::move(callback)](Result<WriteResponse> r) {
+            if (!r.ok())
+                cb(*r.error());
+            else
+                cb(std::move(r.value().results));
+        },
+        deadline);
+}
+
+void Client::callAsync(const NodeId& object, const NodeId& method, std::vector<Variant> inputs,
+                       std::function<void(Result<CallResult>)> callback, Deadline deadline) {
+    requestAsync(
+        singleCall(object, method, std::move(inputs)),
+        [cb = std::move(callback)](Result<CallResponse> r) {
+            auto result = [&]() -> Result<CallResult> {
+                if (!r.ok()) return *r.error();
+                try {
+                    return callResultOf(std::move(r.value()));
+                } catch (const Error& e) {
+                    return e;
+                }
+            }();
+            cb(std::move(result));
+        },
+        deadline);
+}
+
+// ---- namespaces ----------------------------------------------------------------------------
+
+std::vector<std::string> Client::namespaceArray(Deadline deadline) {
+    Variant v = readValue(NodeId(0, ns0::Server_NamespaceArray), deadline);
+    const auto* a = v.array<String>();
+    if (!a)
+        throw Error(status::BadTypeMismatch, "Read of NamespaceArray: not an array of String");
+    std::lock_guard lock(impl_->mutex);
+    impl_->namespaces = *a;
+    return *a;
+}
+
+UInt16 Client::namespaceIndex(std::string_view uri, Deadline deadline) {
+    auto lookup = [&]() -> std::optional<UInt16> {
+        std::lock_guard lock(impl_->mutex);
+        const auto& ns = impl_->namespaces;
+        for (std::size_t i = 0; i < ns.size(); ++i)
+            if (ns[i] == uri) return static_cast<UInt16>(i);
+        return std::nullopt;
+    };
+    if (auto i = lookup()) return *i;
+    namespaceArray(deadline);
+    if (auto i = lookup()) return *i;
+    throw Error(status::BadNotFound, "namespace \"" + std::string(uri) + "\" is not on the server");
+}
+
+NodeId Client::parseNodeId(std::string_view text, Deadline deadline) {
+    auto x = ExpandedNodeId::parse(text);
+    if (!x || x->serverIndex != 0)
+        throw Error(status::BadNodeIdInvalid, "invalid NodeId \"" + std::string(text) + "\"");
+    return toNodeId(*x, deadline);
+}
+
+NodeId Client::toNodeId(const ExpandedNodeId& id, Deadline deadline) {
+    if (id.serverIndex != 0)
+        throw Error(status::BadNodeIdInvalid, "NodeId on another server: " + id.toString());
+    NodeId n = id.nodeId;
+    if (!id.namespaceUri.empty()) n.setNamespaceIndex(namespaceIndex(id.namespaceUri, deadline));
+    return n;
+}
+
+// ---- event loop ----------------------------------------------------------------------------
+
+std::size_t Client::runIterate(milliseconds timeout) {
+    Impl& s = *impl_;
+    Clock::time_point end = Clock::now() + timeout;
+    std::size_t n = 0;
+    short hangup = 0;
+    std::uint64_t watched = 0;
+    for (;;) {
+        Clock::time_point until;
+        int fd = -1;
+        {
+            Completions done;
+            {
+                std::lock_guard lock(s.mutex);
+                s.ensureWakeFd();
+                if (hangup) s.peerHungUp(watched, done);
+                until = s.housekeeping(done);
+                if (s.conn) {
+                    fd = s.conn->nativeHandle();
+                    watched = s.generation;
+                }
+            }
+            n += done.run();
+        }
+        if (n > 0 || Clock::now() >= end) return n;
+        hangup = s.waitForEvents(fd, POLLIN | POLLRDHUP, std::min(end, until)) &
+                 (POLLRDHUP | POLLHUP | POLLERR);
+    }
+}
+
+void Client::startBackgroundThread() {
+    Impl& s = *impl_;
+    std::thread old;
+    {
+        std::lock_guard lock(s.mutex);
+        if (s.thread.joinable()) {
+            // Running, or asked to stop from its own callback and not joined yet.
+            if (!s.stopRequested || s.thread.get_id() == std::this_thread::get_id()) return;
+            old = std::move(s.thread);
+        }
+    }
+    if (old.joinable()) old.join();
+    std::lock_guard lock(s.mutex);
+    if (s.thread.joinable()) return;
+    s.ensureWakeFd();
+    s.stopRequested = false;
+    s.thread = std::thread([&s] { s.backgroundLoop(); });
+}
+
+void Client::stopBackgroundThread() {
+    Impl& s = *impl_;
+    std::thread t;
+    {
+        std::lock_guard lock(s.mutex);
+        if (!s.thread.joinable()) return;
+        s.stopRequested = true;
+        s.wake();
+        // From a callback on the background thread itself: it ends when the callback
+        // returns and is joined by the next start/stop or the destructor.
+        if (s.thread.get_id() == std::this_thread::get_id()) return;
+        t = std::move(s.thread);
+    }
+    t.join();
+}
+
+bool Client::backgroundThreadRunning() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->thread.joinable() && !impl_->stopRequested;
+}
+
+}  // namespace pnp::ua::client

@@ -1,0 +1,306 @@
+#include "ua/demo/demo.hpp"
+
+#include <algorithm>
+#include <array>
+#include <condition_variable>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_ids.hpp"
+#include "ua/types/status_codes.hpp"
+
+namespace pnp::ua::demo {
+
+using server::AddressSpace;
+using server::MethodCompletion;
+using Clock = std::chrono::steady_clock;
+
+// ---- the Sleep worker ------------------------------------------------------------------
+// One thread and a timer queue: every pending Sleep call waits here, none on the network
+// thread. Completions run on the worker thread, without the lock held.
+class SleepWorker {
+public:
+    explicit SleepWorker(std::size_t maxPending) : maxPending_(maxPending) {}
+    ~SleepWorker() { shutdown(); }
+    SleepWorker(const SleepWorker&) = delete;
+    SleepWorker& operator=(const SleepWorker&) = delete;
+
+    // Good, or why the call was not queued (the caller completes it then).
+    StatusCode schedule(Clock::time_point due, MethodCompletion done) {
+        std::lock_guard lock(mutex_);
+        if (stopped_) return status::BadShutdown;
+        if (queue_.size() >= maxPending_) return status::BadTooManyOperations;
+        if (!thread_.joinable()) thread_ = std::thread([this] { run(); });
+        queue_.push_back({due, std::move(done)});
+        std::push_heap(queue_.begin(), queue_.end(), Later{});
+        cv_.notify_one();
+        return status::Good;
+    }
+
+    // Completes every pending call with BadShutdown and joins the thread. Idempotent.
+    void shutdown() {
+        std::thread t;
+        {
+            std::lock_guard lock(mutex_);
+            stopped_ = true;
+            t = std::move(thread_);
+        }
+        cv_.notify_one();
+        if (t.joinable()) {
+            if (t.get_id() == std::this_thread::get_id())
+                t.detach();  // the last owner let go inside a completion: run() returns next
+            else
+                t.join();
+        }
+        std::vector<Entry> rest;
+        {
+            std::lock_guard lock(mutex_);
+            rest.swap(queue_);
+        }
+        for (auto& e : rest) e.done.fail(status::BadShutdown);
+    }
+
+    std::size_t pending() const {
+        std::lock_guard lock(mutex_);
+        return queue_.size();
+    }
+
+private:
+    struct Entry {
+        Clock::time_point due;
+        MethodCompletion done;
+    };
+    struct Later {
+        bool operator()(const Entry& a, const Entry& b) const { return a.due > b.due; }
+    };
+
+    void run() {
+        std::unique_lock lock(mutex_);
+        while (!stopped_) {
+            if (queue_.empty()) {
+                cv_.wait(lock);
+                continue;
+            }
+            Clock::time_point due = queue_.front().due;
+            if (Clock::now() < due) {
+                cv_.wait_until(lock, due);
+                continue;
+            }
+            std::pop_heap(queue_.begin(), queue_.end(), Later{});
+            MethodCompletion done = std::move(queue_.back().done);
+            queue_.pop_back();
+            lock.unlock();
+            done.succeed({});
+            lock.lock();
+        }
+    }
+
+    const std::size_t maxPending_;
+    mutable std::mutex mutex_;
+    std::condition_variable cv_;
+    std::vector<Entry> queue_;  // min-heap by due time
+    std::thread thread_;
+    bool stopped_ = false;
+};
+
+namespace {
+
+constexpr std::array<BuiltinType, 25> kTypes = {
+    BuiltinType::Boolean,       BuiltinType::SByte,          BuiltinType::Byte,
+    BuiltinType::Int16,         BuiltinType::UInt16,         BuiltinType::Int32,
+    BuiltinType::UInt32,        BuiltinType::Int64,          BuiltinType::UInt64,
+    BuiltinType::Float,         BuiltinType::Double,         BuiltinType::String,
+    BuiltinType::DateTime,      BuiltinType::Guid,           BuiltinType::ByteString,
+    BuiltinType::XmlElement,    BuiltinType::NodeId,         BuiltinType::ExpandedNodeId,
+    BuiltinType::StatusCode,    BuiltinType::QualifiedName,  BuiltinType::LocalizedText,
+    BuiltinType::ExtensionObject, BuiltinType::DataValue,    BuiltinType::Variant,
+    BuiltinType::DiagnosticInfo,
+};
+
+// Calls f(T{}) with a default value of the C++ type that holds built-in type t.
+template <class F>
+decltype(auto) withType(BuiltinType t, F&& f) {
+    switch (t) {
+        case BuiltinType::Boolean: return f(Boolean{});
+        case BuiltinType::SByte: return f(SByte{});
+        case BuiltinType::Byte: return f(Byte{});
+        case BuiltinType::Int16: return f(Int16{});
+        case BuiltinType::UInt16: return f(UInt16{});
+        case BuiltinType::Int32: return f(Int32{});
+        case BuiltinType::UInt32: return f(UInt32{});
+        case BuiltinType::Int64: return f(Int64{});
+        case BuiltinType::UInt64: return f(UInt64{});
+        case BuiltinType::Float: return f(Float{});
+        case BuiltinType::Double: return f(Double{});
+        case BuiltinType::String: return f(String{});
+        case BuiltinType::DateTime: return f(DateTime{});
+        case BuiltinType::Guid: return f(Guid{});
+        case BuiltinType::ByteString: return f(ByteString{});
+        case BuiltinType::XmlElement: return f(XmlElement{});
+        case BuiltinType::NodeId: return f(NodeId{});
+        case BuiltinType::ExpandedNodeId: return f(ExpandedNodeId{});
+        case BuiltinType::StatusCode: return f(StatusCode{});
+        case BuiltinType::QualifiedName: return f(QualifiedName{});
+        case BuiltinType::LocalizedText: return f(LocalizedText{});
+        case BuiltinType::ExtensionObject: return f(ExtensionObject{});
+        case BuiltinType::DataValue: return f(DataValue{});
+        case BuiltinType::Variant: return f(Variant{});
+        case BuiltinType::DiagnosticInfo: return f(DiagnosticInfo{});
+        case BuiltinType::Null: break;
+    }
+    throw server::AddressSpaceError(status::BadInvalidArgument, "no demo variable of type Null");
+}
+
+Argument argument(std::string name, UInt32 dataType, std::string description = {}) {
+    Argument a;
+    a.name = std::move(name);
+    a.dataType = NodeId(0, dataType);
+    a.valueRank = -1;
+    a.description = LocalizedText("", std::move(description));
+    return a;
+}
+
+void addNodes(AddressSpace& as, UInt16 ns, std::shared_ptr<SleepWorker> worker,
+              const DemoOptions& options) {
+    server::ObjectAttributes objAttr;
+    objAttr.description = LocalizedText("en", "pnp demo: every built-in type, Echo, Add, Sleep");
+    const NodeId demo = as.addObject(NodeId(0, ns0::ObjectsFolder), NodeId(ns, "Demo"),
+                                     QualifiedName{ns, "Demo"}, objAttr,
+                                     NodeId(0, ns0::BaseObjectType), NodeId(0, ns0::Organizes));
+
+    const Byte rw = server::access_level::CurrentRead | server::access_level::CurrentWrite;
+    for (BuiltinType t : kTypes) {
+        const std::string type(toString(t));
+        for (bool array : {false, true}) {
+            const std::string name = (array ? "Array." : "Scalar.") + type;
+            server::VariableAttributes a;
+            a.description =
+                LocalizedText("en", std::string(array ? "array of " : "scalar ") + type);
+            a.dataType = demoDataType(t);
+            a.valueRank = array ? 1 : -1;
+            if (array) a.arrayDimensions = {0};
+            a.accessLevel = rw;
+            a.value = DataValue(array ? demoInitialArray(t) : demoInitialScalar(t));
+            as.addVariable(demo, NodeId(ns, name), QualifiedName{ns, name}, a,
+                           NodeId(0, ns0::BaseDataVariableType), NodeId(0, ns0::HasComponent));
+        }
+    }
+
+    server::MethodAttributes m;
+    m.description = LocalizedText("en", "returns its input");
+    as.addMethod(demo, NodeId(ns, "Demo.Echo"), QualifiedName{ns, "Echo"},
+                 {argument("Data", ns0::ByteString, "bytes to echo")},
+                 {argument("Data", ns0::ByteString, "the same bytes")},
+                 server::makeMethodHandler([](const server::MethodCallContext&,
+                                              const std::vector<Variant>& in,
+                                              std::vector<Variant>& out) -> StatusCode {
+                     if (in.size() != 1) return status::BadArgumentsMissing;
+                     const ByteString* data = in[0].scalar<ByteString>();
+                     if (data == nullptr) return status::BadTypeMismatch;
+                     out = {*data};
+                     return status::Good;
+                 }),
+                 m);
+
+    m.description = LocalizedText("en", "a + b (Int32, wraps around)");
+    as.addMethod(demo, NodeId(ns, "Demo.Add"), QualifiedName{ns, "Add"},
+                 {argument("a", ns0::Int32), argument("b", ns0::Int32)},
+                 {argument("sum", ns0::Int32)},
+                 server::makeMethodHandler([](const server::MethodCallContext&,
+                                              const std::vector<Variant>& in,
+                                              std::vector<Variant>& out) -> StatusCode {
+                     if (in.size() != 2) return status::BadArgumentsMissing;
+                     const Int32* a = in[0].scalar<Int32>();
+                     const Int32* b = in[1].scalar<Int32>();
+                     if (a == nullptr || b == nullptr) return status::BadTypeMismatch;
+                     // Two's complement wrap-around, like the reference server's (a + b) | 0.
+                     auto sum = static_cast<UInt32>(*a) + static_cast<UInt32>(*b);
+                     out = {static_cast<Int32>(sum)};
+                     return status::Good;
+                 }),
+                 m);
+
+    m.description = LocalizedText(
+        "en", "waits, off the network thread, then completes (asynchronous method)");
+    const auto maxSleep = options.maxSleep;
+    as.addMethod(
+        demo, NodeId(ns, "Demo.Sleep"), QualifiedName{ns, "Sleep"},
+        {argument("milliseconds", ns0::UInt32, "how long to wait")}, {},
+        [worker = std::move(worker), maxSleep](const server::MethodCallContext&,
+                                               std::vector<Variant> in, MethodCompletion done) {
+            const UInt32* ms = in.size() == 1 ? in[0].scalar<UInt32>() : nullptr;
+            if (ms == nullptr) return done.fail(in.empty() ? status::BadArgumentsMissing
+                                                           : status::BadTypeMismatch);
+            const std::chrono::milliseconds d(*ms);
+            if (d > maxSleep) return done.fail(status::BadOutOfRange);
+            StatusCode st = worker->schedule(Clock::now() + d, done);
+            if (st.isBad()) done.fail(st);
+        },
+        m);
+}
+
+UInt16 build(AddressSpace& as, const std::shared_ptr<SleepWorker>& worker,
+             const DemoOptions& options) {
+    const UInt16 ns = as.addNamespace(kNamespaceUri);
+    addNodes(as, ns, worker, options);
+    return ns;
+}
+
+}  // namespace
+
+std::span<const BuiltinType> demoTypes() { return kTypes; }
+
+NodeId demoDataType(BuiltinType t) {
+    switch (t) {
+        case BuiltinType::ExtensionObject: return NodeId(0, ns0::Structure);
+        case BuiltinType::Variant: return NodeId(0, ns0::BaseDataType);
+        default: return NodeId(0, static_cast<UInt32>(t));
+    }
+}
+
+Variant demoInitialScalar(BuiltinType t) {
+    switch (t) {
+        case BuiltinType::ExtensionObject: return toExtensionObject(Range{});  // Range{0, 0}
+        case BuiltinType::Variant: return Int32{0};  // a scalar Variant holds a concrete type
+        default: return withType(t, [](auto v) { return Variant(std::move(v)); });
+    }
+}
+
+Variant demoInitialArray(BuiltinType t) {
+    return withType(t, [](auto v) {
+        Variant out;
+        out.setArray(std::vector<decltype(v)>{});
+        return out;
+    });
+}
+
+// ---- DemoNamespace -----------------------------------------------------------------------
+DemoNamespace::DemoNamespace(server::Server& server, DemoOptions options)
+    : DemoNamespace(server.addressSpace(), options) {}
+
+DemoNamespace::DemoNamespace(AddressSpace& as, DemoOptions options)
+    : worker_(std::make_shared<SleepWorker>(options.maxPendingSleeps)) {
+    ns_ = build(as, worker_, options);
+}
+
+DemoNamespace::~DemoNamespace() { worker_->shutdown(); }
+
+NodeId DemoNamespace::nodeId(std::string_view stringId) const {
+    return NodeId(ns_, std::string(stringId));
+}
+
+std::size_t DemoNamespace::pendingSleeps() const { return worker_->pending(); }
+
+UInt16 addDemoNamespace(server::Server& server, const DemoOptions& options) {
+    return addDemoNamespace(server.addressSpace(), options);
+}
+
+UInt16 addDemoNamespace(AddressSpace& as, const DemoOptions& options) {
+    return build(as, std::make_shared<SleepWorker>(options.maxPendingSleeps), options);
+}
+
+}  // namespace pnp::ua::demo

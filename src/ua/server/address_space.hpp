@@ -1,0 +1,335 @@
+// The server's address space: nodes, references, the address-space services and the
+// application API to build a server's information model.
+//
+// Services (transport-agnostic; the session layer decodes a request, calls these and encodes
+// the response; only responseHeader.serviceResult is set here):
+//   browse / browseNext            OPC 10000-4 §5.8.2 / §5.8.3 (with ContinuationPointStore)
+//   translateBrowsePaths           §5.8.4
+//   registerNodes / unregister     §5.8.5 / §5.8.6 (trivial: ids are returned unchanged)
+//   read / write                   §5.10.2 / §5.10.4
+//   call                           §5.11.2 (asynchronous completion)
+//
+// Application API (RAII, value types; errors throw AddressSpaceError):
+//   addNamespace, namespaceArray, addObject, addVariable, addProperty, addMethod,
+//   addObjectType, addVariableType, addReferenceType, addDataType, addView, addReference,
+//   deleteReference, deleteNode, setValue, readValue, setValueCallback, setMethodHandler.
+//
+// Thread safety: every public member function may be called from any thread. The address
+// space is guarded by one reader/writer lock: Browse, TranslateBrowsePaths and Read take it
+// shared (so they run concurrently with each other and never wait for one another); Write,
+// setValue and structural changes take it exclusively for the few microseconds they need.
+// The intended use is that the network thread runs the services and application threads
+// update live values with setValue(), or serve them on demand with a read callback.
+// Callbacks (value read/write callbacks, method handlers) are always invoked WITHOUT the lock
+// held, so they may call back into the AddressSpace (e.g. a method handler may setValue()).
+// A value read callback runs on the thread that called read() (usually the network thread):
+// it must be fast and must not block. Long-running methods complete asynchronously (see
+// MethodHandler).
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <shared_mutex>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+#include "ua/server/node.hpp"
+#include "ua/server/numeric_range.hpp"
+#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types.hpp"
+
+namespace pnp::ua::server {
+
+// Thrown by the application API (never by the services, which report StatusCodes).
+class AddressSpaceError : public std::runtime_error {
+public:
+    AddressSpaceError(StatusCode s, const std::string& what)
+        : std::runtime_error(what + ": " + s.toString()), status_(s) {}
+    StatusCode status() const { return status_; }
+
+private:
+    StatusCode status_;
+};
+
+// ---- value callbacks -------------------------------------------------------------------
+// read:  returns the current value (with status and source timestamp as appropriate). The
+//        address space applies IndexRange and TimestampsToReturn to it.
+// write: receives the complete new value (an IndexRange write is merged into the current
+//        value first) after access and type checks; returns Good to accept it. When only
+//        `write` is set the accepted value is also stored, so a write callback alone works
+//        as a validation / notification hook. With `read` set and `write` unset the value
+//        is not writable through the Write service (Bad_NotWritable).
+struct ValueCallbacks {
+    std::function<DataValue(const NodeId& node)> read;
+    std::function<StatusCode(const NodeId& node, const DataValue& value)> write;
+};
+
+// ---- methods ---------------------------------------------------------------------------
+struct MethodCallContext {
+    NodeId objectId;
+    NodeId methodId;
+    NodeId sessionId;  // as passed to AddressSpace::call (null when called locally)
+};
+
+// Completes one method call. Copyable; may be invoked from any thread, once (later calls are
+// ignored). If every copy is destroyed without being invoked, the call completes with
+// Bad_InternalError so that a forgotten completion never hangs a client request.
+class MethodCompletion {
+public:
+    MethodCompletion() = default;
+    void operator()(StatusCode status, std::vector<Variant> outputs = {}) const;
+    void succeed(std::vector<Variant> outputs) const { (*this)(StatusCode{}, std::move(outputs)); }
+    void fail(StatusCode status) const { (*this)(status); }
+    bool valid() const { return slot_ != nullptr; }
+
+    struct Slot;  // implementation detail
+
+private:
+    friend class AddressSpace;
+    explicit MethodCompletion(std::shared_ptr<Slot> s) : slot_(std::move(s)) {}
+    std::shared_ptr<Slot> slot_;
+};
+
+// The general (asynchronous) form: the handler receives the checked input arguments and a
+// completion it calls when done, now or later from any thread. A long-running method
+// returns at once and completes from its worker thread; it never blocks the network thread.
+using MethodHandler = std::function<void(const MethodCallContext& context,
+                                         std::vector<Variant> inputs, MethodCompletion done)>;
+// The synchronous convenience form: runs on the calling (network) thread, so it must be quick.
+using SyncMethodHandler = std::function<StatusCode(const MethodCallContext& context,
+                                                   const std::vector<Variant>& inputs,
+                                                   std::vector<Variant>& outputs)>;
+MethodHandler makeMethodHandler(SyncMethodHandler handler);
+
+// ---- browse continuation points ----------------------------------------------------------
+// Continuation points of one session (OPC 10000-4 §7.9). The session owns one store and
+// passes it to browse() / browseNext(); it is not thread-safe (one session's requests are
+// processed one after the other).
+class ContinuationPointStore {
+public:
+    explicit ContinuationPointStore(std::size_t maxPoints = 16);
+    std::size_t size() const { return points_.size(); }
+    std::size_t capacity() const { return max_; }
+    void clear() { points_.clear(); }
+
+private:
+    friend class AddressSpace;
+    struct Point {
+        ByteString id;
+        BrowseDescription description;
+        UInt32 maxReferences = 0;
+        std::uint32_t position = 0;  // index into the node's reference list
+    };
+    bool full() const { return points_.size() >= max_; }
+    const ByteString& add(Point p);
+    Point* find(const ByteString& id);
+    Point take(Point* p);  // removes *p from the store and returns it
+
+    std::vector<Point> points_;
+    std::size_t max_;
+    std::uint64_t next_;
+};
+
+// ---- node attributes for the application API --------------------------------------------
+struct NodeAttributes {
+    LocalizedText displayName;  // empty: the BrowseName's name
+    LocalizedText description;
+    UInt32 writeMask = 0;
+};
+
+struct ObjectAttributes : NodeAttributes {
+    Byte eventNotifier = 0;
+};
+
+struct VariableAttributes : NodeAttributes {
+    NodeId dataType = NodeId(0, ns0::BaseDataType);
+    Int32 valueRank = -1;  // Scalar
+    std::vector<UInt32> arrayDimensions;
+    DataValue value;  // initial value (checked against dataType / valueRank)
+    Byte accessLevel = access_level::CurrentRead;
+    double minimumSamplingInterval = 0;
+    bool historizing = false;
+};
+
+struct MethodAttributes : NodeAttributes {
+    bool executable = true;
+};
+
+struct ObjectTypeAttributes : NodeAttributes {
+    bool isAbstract = false;
+};
+
+struct VariableTypeAttributes : NodeAttributes {
+    NodeId dataType = NodeId(0, ns0::BaseDataType);
+    Int32 valueRank = -2;  // Any
+    std::vector<UInt32> arrayDimensions;
+    std::optional<Variant> value;
+    bool isAbstract = false;
+};
+
+struct ReferenceTypeAttributes : NodeAttributes {
+    bool isAbstract = false;
+    bool symmetric = false;
+    LocalizedText inverseName;
+};
+
+struct DataTypeAttributes : NodeAttributes {
+    bool isAbstract = false;
+    // DataTypeDefinition: an ExtensionObject holding a StructureDefinition or EnumDefinition
+    // (empty: none).
+    ExtensionObject definition;
+};
+
+struct ViewAttributes : NodeAttributes {
+    bool containsNoLoops = false;
+    Byte eventNotifier = 0;
+};
+
+// ---- the address space ---------------------------------------------------------------
+class AddressSpace {
+public:
+    struct Options {
+        // Namespace 1 (OPC 10000-3 §8.2.2: the server's local namespace).
+        std::string applicationUri = "urn:pnp:server";
+        // Load the full namespace 0 (Opc.Ua.NodeSet2.xml, compiled in at build time).
+        bool loadNamespaceZero = true;
+        // Server limit on references per node in one Browse result (0: client's choice).
+        UInt32 maxReferencesPerNode = 0;
+    };
+
+    AddressSpace();
+    explicit AddressSpace(Options options);
+    ~AddressSpace();
+    AddressSpace(const AddressSpace&) = delete;
+    AddressSpace& operator=(const AddressSpace&) = delete;
+
+    // ---- introspection ---------------------------------------------------------------
+    struct Statistics {
+        std::size_t nodes = 0;           // live nodes
+        std::size_t references = 0;      // references (each counted once)
+        std::size_t bytesUsed = 0;       // heap + touched constant data of the model
+        double namespaceZeroLoadMs = 0;  // time spent decoding namespace 0
+    };
+    Statistics statistics() const;
+    bool contains(const NodeId& id) const;
+    std::optional<NodeClass> nodeClass(const NodeId& id) const;
+    // Follows BrowseNames along hierarchical references (convenience for applications):
+    // childOf(ns0::ObjectsFolder, {"Server", "ServerStatus"}).
+    std::optional<NodeId> resolvePath(const NodeId& start,
+                                      std::span<const QualifiedName> path) const;
+
+    // ---- namespaces ------------------------------------------------------------------
+    UInt16 addNamespace(std::string_view uri);  // existing index if already present
+    std::optional<UInt16> namespaceIndex(std::string_view uri) const;
+    std::vector<String> namespaceArray() const;
+
+    // ---- application API: nodes ---------------------------------------------------------
+    // `id` null (ns=N;i=0) asks for a fresh numeric id in namespace N (N=0 means 1).
+    // `referenceType` null picks Organizes below a folder (FolderType or subtype, or a View)
+    // and HasComponent otherwise. Each returns the new node's id.
+    NodeId addObject(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
+                     const ObjectAttributes& attributes = {},
+                     const NodeId& typeDefinition = NodeId(0, ns0::BaseObjectType),
+                     const NodeId& referenceType = {});
+    NodeId addFolder(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
+                     const ObjectAttributes& attributes = {});
+    NodeId addVariable(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
+                       const VariableAttributes& attributes,
+                       const NodeId& typeDefinition = NodeId(0, ns0::BaseDataVariableType),
+                       const NodeId& referenceType = {});
+    // A Property: HasProperty from the parent, type PropertyType.
+    NodeId addProperty(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
+                       const VariableAttributes& attributes);
+    // Also creates the InputArguments / OutputArguments properties (when non-empty).
+    NodeId addMethod(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
+                     const std::vector<Argument>& inputArguments,
+                     const std::vector<Argument>& outputArguments, MethodHandler handler,
+                     const MethodAttributes& attributes = {},
+                     const NodeId& referenceType = NodeId(0, ns0::HasComponent));
+    NodeId addObjectType(const NodeId& parentType, const NodeId& id,
+                         const QualifiedName& browseName,
+                         const ObjectTypeAttributes& attributes = {});
+    NodeId addVariableType(const NodeId& parentType, const NodeId& id,
+                           const QualifiedName& browseName,
+                           const VariableTypeAttributes& attributes = {});
+    NodeId addReferenceType(const NodeId& parentType, const NodeId& id,
+                            const QualifiedName& browseName,
+                            const ReferenceTypeAttributes& attributes = {});
+    NodeId addDataType(const NodeId& parentType, const NodeId& id,
+                       const QualifiedName& browseName, const DataTypeAttributes& attributes = {});
+    NodeId addView(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
+                   const ViewAttributes& attributes = {});
+
+    // References. The target may be a node of another server (not browsed further).
+    void addReference(const NodeId& source, const NodeId& referenceType,
+                      const ExpandedNodeId& target, bool isForward = true);
+    // false when no such reference exists.
+    bool deleteReference(const NodeId& source, const NodeId& referenceType,
+                         const ExpandedNodeId& target, bool isForward = true);
+    // Deletes the node and every reference to or from it; with deleteChildren also the nodes
+    // it aggregates (HasComponent / HasProperty / ..., recursively).
+    void deleteNode(const NodeId& id, bool deleteChildren = true);
+
+    // ---- application API: values ------------------------------------------------------
+    // Sets a Variable's value without access checks but with the type check (returns
+    // Bad_TypeMismatch & co. instead of throwing). A source timestamp is added when absent.
+    StatusCode setValue(const NodeId& variable, DataValue value);
+    DataValue readValue(const NodeId& variable) const;
+    // Serves the value from callbacks (replaces previous callbacks; empty to remove).
+    void setValueCallback(const NodeId& variable, ValueCallbacks callbacks);
+    void setMethodHandler(const NodeId& method, MethodHandler handler);
+
+    // ---- services ---------------------------------------------------------------------
+    BrowseResponse browse(const BrowseRequest& request, ContinuationPointStore& points) const;
+    BrowseNextResponse browseNext(const BrowseNextRequest& request,
+                                  ContinuationPointStore& points) const;
+    TranslateBrowsePathsToNodeIdsResponse translateBrowsePaths(
+        const TranslateBrowsePathsToNodeIdsRequest& request) const;
+    RegisterNodesResponse registerNodes(const RegisterNodesRequest& request) const;
+    UnregisterNodesResponse unregisterNodes(const UnregisterNodesRequest& request) const;
+    ReadResponse read(const ReadRequest& request) const;
+    WriteResponse write(const WriteRequest& request);
+    // Checks every call, runs the handlers and invokes `done` once all of them completed:
+    // before call() returns when every handler completed synchronously, otherwise on the
+    // thread of the last completion (the session layer posts it back to its own thread).
+    void call(const CallRequest& request, const NodeId& sessionId,
+              std::function<void(CallResponse)> done);
+    // Blocks until every method completed (for application threads and tests; never call it
+    // on the network thread with asynchronous handlers).
+    CallResponse callSync(const CallRequest& request, const NodeId& sessionId = {});
+
+    // ---- single operations ---------------------------------------------------------------
+    BrowseResult browse(const BrowseDescription& description, UInt32 maxReferences,
+                        ContinuationPointStore& points) const;
+    BrowsePathResult translateBrowsePath(const BrowsePath& path) const;
+    DataValue read(const ReadValueId& item,
+                   TimestampsToReturn timestamps = TimestampsToReturn::Neither) const;
+    DataValue readAttribute(const NodeId& id, AttributeId attribute,
+                            std::string_view indexRange = {}) const;
+    StatusCode write(const WriteValue& item);
+    StatusCode writeAttribute(const NodeId& id, AttributeId attribute, const Variant& value);
+
+    // ---- type checks (exposed for the session layer and tests) -------------------------
+    // Whether a value of built-in type/ExtensionObject content fits DataType `dataType`
+    // (subtypes included, OPC 10000-4 §7.7 / 10000-3 §8), with the ValueRank and
+    // ArrayDimensions constraints. Good or Bad_TypeMismatch.
+    StatusCode checkValue(const Variant& value, const NodeId& dataType, Int32 valueRank,
+                          std::span<const UInt32> arrayDimensions = {}) const;
+    bool isSubtypeOf(const NodeId& type, const NodeId& base) const;
+
+    // Internal state (defined in address_space_impl.hpp, private to pnp_ua_server).
+    struct Impl;
+
+private:
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace pnp::ua::server

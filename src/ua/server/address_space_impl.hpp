@@ -1,0 +1,170 @@
+// Internal: the state behind AddressSpace, shared by the .cpp files of the address space
+// (address_space.cpp: model + application API, nodeset_loader.cpp: blob decoding,
+// view_services.cpp: Browse/Translate, attribute_services.cpp: Read/Write/type checks,
+// method_services.cpp: Call). Not part of the public API.
+#pragma once
+
+#include <chrono>
+#include <memory>
+#include <shared_mutex>
+#include <unordered_map>
+#include <vector>
+
+#include "ua/server/address_space.hpp"
+#include "ua/server/node.hpp"
+#include "ua/types/status_codes.hpp"
+
+namespace pnp::ua::server {
+
+inline constexpr std::uint16_t kNoRefType = 0xFFFF;
+
+inline bool isClass(const Node& n, NodeClassBits c) { return n.nodeClass == c; }
+inline NodeClass toNodeClass(NodeClassBits c) { return static_cast<NodeClass>(c); }
+
+struct AddressSpace::Impl {
+    explicit Impl(Options o);
+
+    Options options;
+    mutable std::shared_mutex mutex;
+
+    // ---- nodes and ids -------------------------------------------------------------------
+    std::vector<Node> nodes;
+    std::size_t liveNodes = 0;
+    std::size_t referenceCount = 0;  // each reference once
+    std::vector<NodeIndex> ns0Index;  // numeric ns=0 id -> node
+    std::unordered_map<std::uint64_t, NodeIndex> numericIndex;  // other numeric ids
+    std::vector<NodeId> otherIds;  // string / guid / opaque ids (Node::idValue indexes it)
+    std::unordered_map<NodeId, NodeIndex> otherIndex;
+    std::vector<ExpandedNodeId> externalTargets;  // targets on other servers (Ref::kExternal)
+    StringPool strings;
+    std::vector<String> namespaces;
+    std::unordered_map<UInt16, UInt32> nextNumericId;
+
+    // ---- reference types -------------------------------------------------------------------
+    std::vector<NodeIndex> refTypes;  // dense index -> ReferenceType node
+    // subtypes[t]: bit set over dense indexes of t and all its subtypes (HasSubtype closure).
+    std::vector<std::vector<std::uint64_t>> subtypes;
+    std::uint16_t rtHasSubtype = kNoRefType, rtHasTypeDefinition = kNoRefType,
+                  rtHasComponent = kNoRefType, rtHasProperty = kNoRefType,
+                  rtHasEncoding = kNoRefType, rtOrganizes = kNoRefType,
+                  rtHierarchical = kNoRefType, rtAggregates = kNoRefType,
+                  rtHasModellingRule = kNoRefType;
+
+    // Shared reference arrays of the loaded NodeSets (RefList slices borrow from them).
+    std::vector<std::unique_ptr<Ref[]>> refPools;
+    std::size_t refPoolBytes = 0;
+    std::size_t blobBytesTouched = 0;
+
+    std::unordered_map<NodeIndex, std::shared_ptr<const MethodHandler>> methods;
+    double ns0LoadMs = 0;
+
+    // ---- lookups (callers hold the lock) ------------------------------------------------------
+    NodeIndex find(const NodeId& id) const {
+        if (id.isNumeric()) {
+            UInt32 v = id.numeric();
+            if (id.namespaceIndex() == 0) return v < ns0Index.size() ? ns0Index[v] : kNoNode;
+            auto it = numericIndex.find(numericKey(id.namespaceIndex(), v));
+            return it == numericIndex.end() ? kNoNode : it->second;
+        }
+        auto it = otherIndex.find(id);
+        return it == otherIndex.end() ? kNoNode : it->second;
+    }
+    NodeIndex find(std::uint32_t ns0Id) const {
+        return ns0Id < ns0Index.size() ? ns0Index[ns0Id] : kNoNode;
+    }
+    static std::uint64_t numericKey(UInt16 ns, UInt32 v) {
+        return (static_cast<std::uint64_t>(ns) << 32) | v;
+    }
+    NodeId idOf(NodeIndex i) const {
+        const Node& n = nodes[i];
+        return n.idKind == 0 ? NodeId(n.ns, n.idValue) : otherIds[n.idValue];
+    }
+    ExpandedNodeId targetIdOf(const Ref& r) const {
+        return r.isExternal() ? externalTargets[r.target] : ExpandedNodeId(idOf(r.target));
+    }
+    bool isNs0(const NodeId& id, std::uint32_t v) const {
+        return id.namespaceIndex() == 0 && id.isNumeric() && id.numeric() == v;
+    }
+    QualifiedName browseNameOf(const Node& n) const {
+        return QualifiedName{n.browseNs, String(strings.get(n.browseName))};
+    }
+    LocalizedText displayNameOf(const Node& n) const {
+        return LocalizedText(String(strings.get(n.displayLocale)),
+                             String(strings.get(n.displayText)));
+    }
+    std::uint16_t refTypeIndexOf(NodeIndex i) const {
+        if (i == kNoNode) return kNoRefType;
+        const Node& n = nodes[i];
+        return (n.nodeClass == NodeClassBits::ReferenceType && n.extra) ? n.extra->refTypeIndex
+                                                                          : kNoRefType;
+    }
+    bool refTypeMatches(std::uint16_t type, std::uint16_t base, bool includeSubtypes) const {
+        if (type == base) return true;
+        if (!includeSubtypes || base >= subtypes.size()) return false;
+        const auto& row = subtypes[base];
+        return (type >> 6) < row.size() && ((row[type >> 6] >> (type & 63)) & 1u) != 0;
+    }
+    // Target of the first forward reference of `type` (exact type), kNoNode if none.
+    NodeIndex forwardTarget(NodeIndex i, std::uint16_t type) const {
+        for (const Ref& r : nodes[i].refs)
+            if (r.type == type && r.isForward() && !r.isExternal()) return r.target;
+        return kNoNode;
+    }
+    NodeIndex typeDefinitionOf(NodeIndex i) const { return forwardTarget(i, rtHasTypeDefinition); }
+    NodeIndex supertypeOf(NodeIndex i) const {
+        for (const Ref& r : nodes[i].refs)
+            if (r.type == rtHasSubtype && !r.isForward() && !r.isExternal()) return r.target;
+        return kNoNode;
+    }
+    bool isSubtype(NodeIndex t, NodeIndex base) const {
+        for (int depth = 0; t != kNoNode && depth < 64; ++depth) {
+            if (t == base) return true;
+            t = supertypeOf(t);
+        }
+        return false;
+    }
+    // Child of `parent` with this BrowseName over hierarchical forward references.
+    NodeIndex childByName(NodeIndex parent, const QualifiedName& name) const;
+
+    // ---- mutation (callers hold the lock exclusively) -------------------------------------
+    NodeIndex createNode(const NodeId& id, NodeClassBits cls, const QualifiedName& browseName,
+                         const NodeAttributes& attributes);
+    void registerId(NodeIndex i, const NodeId& id);
+    void unregisterId(NodeIndex i);
+    void link(NodeIndex source, std::uint16_t type, NodeIndex target);
+    bool unlink(NodeIndex source, std::uint16_t type, NodeIndex target);
+    void addRefType(NodeIndex i);
+    void rebuildSubtypeClosure();
+    void rememberWellKnownRefTypes();
+    NodeId freshId(UInt16 ns);
+    void deleteNode(NodeIndex i, bool children);
+
+    // ---- NodeSet blobs (nodeset_loader.cpp) -------------------------------------------------
+    void loadNodeSet(const Byte* blob, std::size_t size);
+
+    // ---- attributes (attribute_services.cpp) --------------------------------------------------
+    // Reads an attribute; the lock is held shared on entry and may be released for a read
+    // callback (`lock` is the caller's lock).
+    DataValue readAttribute(std::shared_lock<std::shared_mutex>& lock, const ReadValueId& item,
+                            TimestampsToReturn timestamps) const;
+    StatusCode checkValue(const Variant& v, NodeIndex dataType, Int32 valueRank,
+                          std::span<const UInt32> arrayDimensions, bool allowEmpty) const;
+    bool builtinMatches(BuiltinType b, const Variant& v, NodeIndex dataType) const;
+    DataValue storedValue(const Node& n) const;
+    Variant decodeDefinition(const Node& n) const;
+    std::vector<Argument> methodArguments(NodeIndex method, const char* name) const;
+    StatusCode writeAttribute(std::unique_lock<std::shared_mutex>& lock, const WriteValue& item,
+                              bool checkAccess);
+
+    // ---- browse (view_services.cpp) -----------------------------------------------------------
+    ReferenceDescription describe(const Ref& r, UInt32 resultMask) const;
+    bool referenceMatches(const Ref& r, BrowseDirection dir, std::uint16_t type,
+                          bool includeSubtypes, UInt32 nodeClassMask) const;
+
+    std::size_t bytesUsed() const;
+};
+
+// Number of ns0 nodes compiled in (from the generated blob).
+std::size_t namespaceZeroBlobNodeCount();
+
+}  // namespace pnp::ua::server

@@ -1,0 +1,181 @@
+// Method Service Set (OPC 10000-4 §5.11): Call with asynchronous completion.
+#include <future>
+
+#include "ua/server/address_space_impl.hpp"
+
+namespace pnp::ua::server {
+
+namespace {
+
+// Collects the results of one Call request; completes it when the last method finished.
+struct CallState {
+    CallState(std::size_t n, std::function<void(CallResponse)> d) : pending(n + 1), done(std::move(d)) {
+        response.results.resize(n);
+    }
+    // Records a result; the last one (pending reaches 0) delivers the response.
+    void complete(std::size_t index, StatusCode status, std::vector<Variant> outputs) {
+        std::unique_lock lock(mutex);
+        auto& r = response.results[index];
+        r.statusCode = status;
+        if (status.isGood()) r.outputArguments = std::move(outputs);
+        finishOne(lock);
+    }
+    void finishOne(std::unique_lock<std::mutex>& lock) {
+        if (--pending != 0) return;
+        CallResponse out = std::move(response);
+        auto callback = std::move(done);
+        lock.unlock();
+        if (callback) callback(std::move(out));
+    }
+
+    std::mutex mutex;
+    CallResponse response;
+    std::size_t pending;
+    std::function<void(CallResponse)> done;
+};
+
+}  // namespace
+
+struct MethodCompletion::Slot {
+    Slot(std::shared_ptr<CallState> s, std::size_t i) : state(std::move(s)), index(i) {}
+    ~Slot() {
+        if (!completed.exchange(true)) state->complete(index, status::BadInternalError, {});
+    }
+    std::shared_ptr<CallState> state;
+    std::size_t index;
+    std::atomic<bool> completed{false};
+};
+
+void MethodCompletion::operator()(StatusCode status, std::vector<Variant> outputs) const {
+    if (!slot_ || slot_->completed.exchange(true)) return;
+    slot_->state->complete(slot_->index, status, std::move(outputs));
+}
+
+MethodHandler makeMethodHandler(SyncMethodHandler handler) {
+    return [h = std::move(handler)](const MethodCallContext& context, std::vector<Variant> inputs,
+                                    MethodCompletion done) {
+        std::vector<Variant> outputs;
+        StatusCode s = h(context, inputs, outputs);
+        done(s, std::move(outputs));
+    };
+}
+
+namespace {
+
+// Whether `method` is a component of `object`, of its type or of a supertype of that type.
+bool methodBelongsTo(const AddressSpace::Impl& s, NodeIndex object, NodeIndex method) {
+    auto hasComponent = [&](NodeIndex holder) {
+        for (const Ref& r : s.nodes[holder].refs)
+            if (r.target == method && r.isForward() && !r.isExternal() &&
+                s.refTypeMatches(r.type, s.rtHasComponent, true))
+                return true;
+        return false;
+    };
+    if (hasComponent(object)) return true;
+    NodeIndex type = s.nodes[object].nodeClass == NodeClassBits::Object ? s.typeDefinitionOf(object)
+                                                                         : s.supertypeOf(object);
+    for (int depth = 0; type != kNoNode && depth < 64; ++depth) {
+        if (hasComponent(type)) return true;
+        type = s.supertypeOf(type);
+    }
+    return false;
+}
+
+}  // namespace
+
+void AddressSpace::call(const CallRequest& request, const NodeId& sessionId,
+                        std::function<void(CallResponse)> done) {
+    if (request.methodsToCall.empty()) {
+        CallResponse r;
+        r.responseHeader.serviceResult = status::BadNothingToDo;
+        if (done) done(std::move(r));
+        return;
+    }
+    const std::size_t n = request.methodsToCall.size();
+    auto state = std::make_shared<CallState>(n, std::move(done));
+    struct Run {
+        std::size_t index;
+        std::shared_ptr<const MethodHandler> handler;
+        MethodCallContext context;
+    };
+    std::vector<Run> runs;
+    runs.reserve(n);
+    {
+        std::shared_lock lock(impl_->mutex);
+        const Impl& s = *impl_;
+        for (std::size_t k = 0; k < n; ++k) {
+            const CallMethodRequest& m = request.methodsToCall[k];
+            CallMethodResult& res = state->response.results[k];
+            NodeIndex object = s.find(m.objectId);
+            NodeIndex method = s.find(m.methodId);
+            StatusCode st;
+            if (object == kNoNode) {
+                st = status::BadNodeIdUnknown;
+            } else if (s.nodes[object].nodeClass != NodeClassBits::Object &&
+                       s.nodes[object].nodeClass != NodeClassBits::ObjectType) {
+                st = status::BadNodeIdInvalid;
+            } else if (method == kNoNode || s.nodes[method].nodeClass != NodeClassBits::Method ||
+                       !methodBelongsTo(s, object, method)) {
+                st = status::BadMethodInvalid;
+            } else if (!s.nodes[method].has(Node::kExecutable)) {
+                st = status::BadNotExecutable;
+            } else if (!s.nodes[method].has(Node::kUserExecutable)) {
+                st = status::BadUserAccessDenied;
+            } else {
+                std::vector<Argument> args = s.methodArguments(method, "InputArguments");
+                if (m.inputArguments.size() < args.size()) {
+                    st = status::BadArgumentsMissing;
+                } else if (m.inputArguments.size() > args.size()) {
+                    st = status::BadTooManyArguments;
+                } else {
+                    std::vector<StatusCode> argResults(args.size());
+                    bool anyBad = false;
+                    for (std::size_t a = 0; a < args.size(); ++a) {
+                        NodeIndex dt = s.find(args[a].dataType);
+                        bool allowEmpty = dt == s.find(ns0::BaseDataType);
+                        argResults[a] = s.checkValue(m.inputArguments[a], dt, args[a].valueRank,
+                                                     args[a].arrayDimensions, allowEmpty);
+                        anyBad = anyBad || argResults[a].isBad();
+                    }
+                    if (anyBad) {
+                        st = status::BadInvalidArgument;
+                        res.inputArgumentResults = std::move(argResults);
+                    } else {
+                        auto h = s.methods.find(method);
+                        if (h == s.methods.end() || !h->second || !*h->second) {
+                            st = status::BadNotImplemented;
+                        } else {
+                            runs.push_back(Run{k, h->second,
+                                               MethodCallContext{m.objectId, m.methodId, sessionId}});
+                            continue;
+                        }
+                    }
+                }
+            }
+            res.statusCode = st;
+            --state->pending;  // not shared with any thread yet
+        }
+    }
+    // Handlers run without the lock; each may complete now or later, on any thread.
+    for (auto& run : runs) {
+        auto slot = std::make_shared<MethodCompletion::Slot>(state, run.index);
+        MethodCompletion completion(slot);
+        try {
+            (*run.handler)(run.context, request.methodsToCall[run.index].inputArguments,
+                           completion);
+        } catch (...) {
+            completion(status::BadInternalError);
+        }
+    }
+    std::unique_lock lock(state->mutex);
+    state->finishOne(lock);
+}
+
+CallResponse AddressSpace::callSync(const CallRequest& request, const NodeId& sessionId) {
+    auto promise = std::make_shared<std::promise<CallResponse>>();
+    auto future = promise->get_future();
+    call(request, sessionId, [promise](CallResponse r) { promise->set_value(std::move(r)); });
+    return future.get();
+}
+
+}  // namespace pnp::ua::server

@@ -1,0 +1,135 @@
+// The OPC UA server: endpoints, sessions and service dispatch on top of the opc.tcp
+// transport and the address space.
+//
+// Threading: the server owns one network thread. Every service runs on it, so services must
+// be quick; long-running work (a method that moves a robot) completes later from any thread
+// through the method's completion callback. Applications change the address space from
+// their own threads through Server::post() or the address space's thread-safe value setters.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "ua/server/access_control.hpp"
+#include "ua/server/address_space.hpp"
+#include "ua/transport/tcp_server.hpp"
+#include "ua/types/ns0_types.hpp"
+
+namespace pnp::ua::server {
+
+// Per-service operation limits (advertised in ServerCapabilities/OperationLimits).
+struct OperationLimits {
+    UInt32 maxNodesPerRead = 10000;
+    UInt32 maxNodesPerWrite = 10000;
+    UInt32 maxNodesPerBrowse = 10000;
+    UInt32 maxNodesPerMethodCall = 1000;
+    UInt32 maxNodesPerTranslateBrowsePathsToNodeIds = 10000;
+    UInt32 maxNodesPerRegisterNodes = 10000;
+    UInt32 maxBrowseContinuationPoints = 16;  // per session
+};
+
+struct ServerConfig {
+    std::string applicationUri = "urn:pnp:server";
+    std::string productUri = "urn:pnp";
+    std::string applicationName = "pnp OPC UA server";
+    std::string manufacturerName = "pnp";
+    std::string productName = "pnp";
+    std::string softwareVersion = "0.1.0";
+    std::string buildNumber = "1";
+
+    std::string host = "0.0.0.0";     // listen address
+    std::string publicHost;           // host name put into endpoint URLs; default: hostname
+    UInt16 port = 4840;               // 0: ephemeral
+    std::string endpointPath;         // e.g. "/pnp"
+
+    transport::ServerTransportConfig transport;
+    OperationLimits limits;
+    DecodeLimits decodeLimits;
+
+    UInt32 maxSessions = 100;
+    Double minSessionTimeoutMs = 1000;
+    Double maxSessionTimeoutMs = 3600000;
+
+    std::shared_ptr<AccessControl> accessControl;  // default: anonymous only
+};
+
+class Server : private transport::ServiceHandler {
+public:
+    explicit Server(ServerConfig config = {});
+    ~Server() override;
+    Server(const Server&) = delete;
+    Server& operator=(const Server&) = delete;
+
+    // The nodes. Build the address space before start(), or change it later on the network
+    // thread (post()).
+    AddressSpace& addressSpace() { return *addressSpace_; }
+    UInt16 addNamespace(const std::string& uri);
+
+    void start();  // binds and starts the network thread; throws on bind failure
+    void stop();   // closes every connection and joins the network thread
+    bool running() const;
+    UInt16 port() const;
+    std::string endpointUrl() const;  // opc.tcp://publicHost:port/path
+    const ServerConfig& config() const { return config_; }
+
+    // Runs fn on the network thread (immediately if called from it).
+    void post(std::function<void()> fn);
+
+    // Open sessions (any thread).
+    std::size_t sessionCount() const { return sessionCount_.load(std::memory_order_relaxed); }
+
+private:
+    struct Session;
+    struct Ctx;
+
+    void onRequest(const std::shared_ptr<transport::ServerConnection>& conn,
+                   const transport::IncomingRequest& req) override;
+    void onConnectionClosed(const std::shared_ptr<transport::ServerConnection>& conn) override;
+
+    template <class Req, class Resp>
+    void serve(const std::shared_ptr<transport::ServerConnection>& conn,
+               const transport::IncomingRequest& in, bool needsSession,
+               void (Server::*handler)(Ctx&, const Req&, Resp&));
+    template <class Req>
+    bool accept(const std::shared_ptr<transport::ServerConnection>& conn,
+                const transport::IncomingRequest& in, bool needsSession, Req& req, Ctx& ctx);
+
+    // Services.
+    void getEndpoints(Ctx&, const GetEndpointsRequest&, GetEndpointsResponse&);
+    void findServers(Ctx&, const FindServersRequest&, FindServersResponse&);
+    void createSession(Ctx&, const CreateSessionRequest&, CreateSessionResponse&);
+    void activateSession(Ctx&, const ActivateSessionRequest&, ActivateSessionResponse&);
+    void closeSession(Ctx&, const CloseSessionRequest&, CloseSessionResponse&);
+    void read(Ctx&, const ReadRequest&, ReadResponse&);
+    void write(Ctx&, const WriteRequest&, WriteResponse&);
+    void browse(Ctx&, const BrowseRequest&, BrowseResponse&);
+    void browseNext(Ctx&, const BrowseNextRequest&, BrowseNextResponse&);
+    void translate(Ctx&, const TranslateBrowsePathsToNodeIdsRequest&,
+                   TranslateBrowsePathsToNodeIdsResponse&);
+    void registerNodes(Ctx&, const RegisterNodesRequest&, RegisterNodesResponse&);
+    void unregisterNodes(Ctx&, const UnregisterNodesRequest&, UnregisterNodesResponse&);
+    void call(const std::shared_ptr<transport::ServerConnection>& conn,
+              const transport::IncomingRequest& in);
+
+    std::vector<EndpointDescription> endpointDescriptions(const std::string& url) const;
+    ApplicationDescription applicationDescription() const;
+    void setUpServerObject();
+    void expireSessions();
+
+    ServerConfig config_;
+    std::unique_ptr<AddressSpace> addressSpace_;
+    std::unique_ptr<transport::TcpServer> transport_;
+    DateTime startTime_;
+    std::unordered_map<NodeId, std::unique_ptr<Session>> sessions_;  // by authentication token
+    UInt32 nextSessionNumber_ = 1;
+    std::atomic<std::size_t> sessionCount_{0};
+    void updateSessionCount() { sessionCount_.store(sessions_.size(), std::memory_order_relaxed); }
+};
+
+}  // namespace pnp::ua::server

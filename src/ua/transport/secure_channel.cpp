@@ -1,0 +1,612 @@
+#include "ua/transport/secure_channel.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+#include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_types.hpp"
+#include "ua/types/status_codes.hpp"
+
+namespace pnp::ua::transport {
+
+namespace {
+
+// Receive buffer: the largest chunk plus room to take in the start of the next ones with
+// the same read.
+constexpr std::size_t kReadSlack = 16 * 1024;
+// Before the Hello the largest acceptable chunk: a Hello is at most 8 + 20 + 4 + 4096 bytes.
+constexpr std::size_t kPreHelloMaxChunk = kMinBufferSize;
+
+std::size_t readCapacity(const TransportLimits& l) {
+    return std::max(l.receiveBufferSize, kMinBufferSize) + kReadSlack;
+}
+
+template <class T>
+NodeId encodingId() {
+    return NodeId(0, DataTypeInfo<T>::binaryEncodingId);
+}
+
+NodeId decodeTypeId(BinaryDecoder& d) {
+    NodeId id;
+    decode(d, id);
+    return id;
+}
+
+// The RequestHandle of an encoded response (type NodeId, then ResponseHeader: Timestamp,
+// RequestHandle, ...); 0 when it cannot be read.
+UInt32 responseRequestHandle(const Buffer& message) {
+    try {
+        BinaryDecoder d(message.data() + kSymmetricHeaderSize,
+                        message.size() - kSymmetricHeaderSize);
+        decodeTypeId(d);
+        d.skip(8);
+        return d.number<UInt32>();
+    } catch (const DecodeError&) {
+        return 0;
+    }
+}
+
+// Whether a message exceeds what the peer announced. The spec counts the message body
+// against MaxMessageSize; some stacks (node-opcua) count whole chunks, so we count the chunk
+// headers too and never send what either reading would reject.
+bool exceedsPeerLimits(const NegotiatedLimits& l, std::size_t body, std::size_t chunks) {
+    if (l.maxSendChunkCount && chunks > l.maxSendChunkCount) return true;
+    return l.maxSendMessageSize && body + chunks * kSymmetricHeaderSize > l.maxSendMessageSize;
+}
+
+}  // namespace
+
+// =======================================================================================
+// ServerChannel
+// =======================================================================================
+ServerChannel::ServerChannel(const ServerTransportConfig& config, Hooks& hooks, TimePoint now)
+    : config_(config),
+      hooks_(hooks),
+      reader_(readCapacity(config), kPreHelloMaxChunk),
+      started_(now),
+      lastReceive_(now) {}
+
+void ServerChannel::feed(const Byte* p, std::size_t n, TimePoint now) {
+    while (n > 0) {
+        if (state_ == State::Closed) return;
+        auto space = readSpace();
+        std::size_t k = std::min(n, space.size());
+        std::memcpy(space.data(), p, k);
+        received(k, now);
+        p += k;
+        n -= k;
+    }
+}
+
+void ServerChannel::received(std::size_t n, TimePoint now) {
+    reader_.commit(n);
+    lastReceive_ = now;
+    if (state_ == State::Closed) {
+        reader_.clear();
+        return;
+    }
+    try {
+        while (state_ != State::Closed) {
+            auto chunk = reader_.next();
+            if (!chunk) break;
+            handleChunk(*chunk, now);
+        }
+    } catch (const TransportError& e) {
+        fail(e.status(), e.what());
+    } catch (const DecodeError& e) {
+        fail(status::BadDecodingError, e.what());
+    } catch (const std::exception& e) {
+        fail(status::BadTcpInternalError, e.what());
+    }
+    if (state_ == State::Closed) reader_.clear();
+}
+
+void ServerChannel::handleChunk(const RawChunk& raw, TimePoint now) {
+    switch (raw.header.type) {
+        case MessageType::Hello:
+            if (state_ != State::AwaitHello)
+                throw TransportError(status::BadTcpMessageTypeInvalid, "unexpected HEL");
+            handleHello(raw);
+            return;
+        case MessageType::OpenSecureChannel:
+        case MessageType::Message:
+        case MessageType::CloseSecureChannel:
+            if (state_ == State::AwaitHello) {
+                throw TransportError(status::BadTcpMessageTypeInvalid,
+                                     std::string(toString(raw.header.type)) + " before HEL");
+            }
+            handleSecureChunk(raw, now);
+            return;
+        default:
+            throw TransportError(
+                status::BadTcpMessageTypeInvalid,
+                std::string(toString(raw.header.type)) + " is not accepted by a server");
+    }
+}
+
+void ServerChannel::handleHello(const RawChunk& raw) {
+    Hello hello = decodeHello(raw.data + kMessageHeaderSize, raw.size - kMessageHeaderSize);
+    Acknowledge ack;
+    limits_ = negotiateAsServer(hello, config_, ack);
+    helloVersion_ = hello.protocolVersion;
+    endpointUrl_ = std::move(hello.endpointUrl);
+    reader_.setMaxChunkSize(limits_.receiveBufferSize);
+    assembler_.setLimits({limits_.maxReceiveMessageSize, limits_.maxReceiveChunkCount});
+    state_ = State::AwaitOpen;
+    hooks_.write(encodeMessage(ack));
+}
+
+void ServerChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
+    SecureChunk c = parseSecureChunk(raw);
+    if (state_ == State::AwaitOpen) {
+        if (c.type != MessageType::OpenSecureChannel) {
+            throw TransportError(status::BadTcpMessageTypeInvalid,
+                                 std::string(toString(c.type)) + " before OpenSecureChannel");
+        }
+    } else {  // Open
+        if (c.channelId != channelId_) {
+            throw TransportError(status::BadSecureChannelIdInvalid,
+                                 "secure channel id " + std::to_string(c.channelId) +
+                                     ", expected " + std::to_string(channelId_));
+        }
+        if (!current_.usable(now))
+            throw TransportError(status::BadSecureChannelClosed, "security token expired");
+        if (c.type != MessageType::OpenSecureChannel) checkToken(c.tokenId, now);
+    }
+    if (c.type == MessageType::OpenSecureChannel && c.securityPolicyUri != kSecurityPolicyNone) {
+        throw TransportError(status::BadSecurityPolicyRejected,
+                             "SecurityPolicy " + std::string(c.securityPolicyUri.substr(0, 200)));
+    }
+    receiveSequence_.check(c.sequenceNumber);
+
+    auto ev = assembler_.add(c);
+    if (ev.result != MessageAssembler::Result::Complete) return;  // incomplete / aborted
+    switch (ev.type) {
+        case MessageType::OpenSecureChannel:
+            handleOpen(ev.requestId, ev.body, ev.size, now);
+            break;
+        case MessageType::Message:
+            handleMessage(ev.requestId, ev.body, ev.size);
+            break;
+        case MessageType::CloseSecureChannel:
+            close();
+            break;
+        default:
+            break;
+    }
+}
+
+void ServerChannel::checkToken(UInt32 tokenId, TimePoint now) {
+    if (tokenId == current_.tokenId) {
+        // The client uses the newest token: the previous one is done with.
+        previous_.reset();
+        sendTokenId_ = current_.tokenId;
+        return;
+    }
+    if (previous_ && tokenId == previous_->tokenId && previous_->usable(now)) return;
+    throw TransportError(status::BadSecureChannelTokenUnknown,
+                         "token id " + std::to_string(tokenId));
+}
+
+void ServerChannel::dropExpiredPrevious(TimePoint now) {
+    if (previous_ && !previous_->usable(now)) {
+        previous_.reset();
+        sendTokenId_ = current_.tokenId;
+    }
+}
+
+void ServerChannel::handleOpen(UInt32 requestId, const Byte* body, std::size_t size,
+                               TimePoint now) {
+    BinaryDecoder d(body, size);
+    OpenSecureChannelRequest req;
+    if (decodeTypeId(d) != encodingId<OpenSecureChannelRequest>())
+        throw TransportError(status::BadDecodingError, "OPN without OpenSecureChannelRequest");
+    decode(d, req);
+
+    if (req.clientProtocolVersion != helloVersion_ &&
+        req.clientProtocolVersion != kProtocolVersion) {
+        throw TransportError(status::BadProtocolVersionUnsupported,
+                             "OpenSecureChannel protocol version " +
+                                 std::to_string(req.clientProtocolVersion) + " differs from HEL");
+    }
+    const bool renew = req.requestType == SecurityTokenRequestType::Renew;
+    if (!(req.requestType == SecurityTokenRequestType::Issue && state_ == State::AwaitOpen) &&
+        !(renew && state_ == State::Open)) {
+        throw TransportError(status::BadRequestTypeInvalid, state_ == State::Open
+                                                                ? "Issue on an open secure channel"
+                                                                : "Renew before Issue");
+    }
+    if (req.securityMode != MessageSecurityMode::None) {
+        throw TransportError(status::BadSecurityModeRejected,
+                             "only MessageSecurityMode None is supported");
+    }
+
+    auto lifetime = std::clamp(std::chrono::milliseconds(req.requestedLifetime),
+                               config_.minTokenLifetime, config_.maxTokenLifetime);
+    if (!renew) channelId_ = hooks_.newChannelId();
+    TokenState token{nextTokenId_++, now, lifetime};
+    if (nextTokenId_ == 0) nextTokenId_ = 1;
+    if (renew) {
+        // Keep sending with the token the client has been using until it uses the new one
+        // (Part 4 §5.5.2.1); it stays acceptable until then or until it expires.
+        sendTokenId_ = current_.tokenId;
+        previous_ = current_;
+    } else {
+        sendTokenId_ = token.tokenId;
+        state_ = State::Open;
+    }
+    current_ = token;
+
+    OpenSecureChannelResponse resp;
+    resp.responseHeader.timestamp = DateTime::now();
+    resp.responseHeader.requestHandle = req.requestHeader.requestHandle;
+    resp.serverProtocolVersion = kProtocolVersion;
+    resp.securityToken.channelId = channelId_;
+    resp.securityToken.tokenId = token.tokenId;
+    resp.securityToken.createdAt = resp.responseHeader.timestamp;
+    resp.securityToken.revisedLifetime = static_cast<UInt32>(lifetime.count());
+    Buffer out;
+    out.reserve(128);
+    BinaryEncoder e(out);
+    encode(e, encodingId<OpenSecureChannelResponse>());
+    encode(e, resp);
+    hooks_.write(
+        makeOpenChunk(channelId_, sendSequence_.next(), requestId, out.data(), out.size()));
+}
+
+void ServerChannel::handleMessage(UInt32 requestId, const Byte* body, std::size_t size) {
+    BinaryDecoder d(body, size);
+    IncomingRequest r;
+    r.requestId = requestId;
+    r.typeId = decodeTypeId(d);
+    r.body = d.position();
+    r.size = d.remaining();
+    hooks_.request(r);
+}
+
+bool ServerChannel::send(UInt32 requestId, Buffer&& message) {
+    if (state_ != State::Open) return false;
+    if (message.size() < kSymmetricHeaderSize) return false;
+    if (previous_) dropExpiredPrevious(Clock::now());
+    const std::size_t body = message.size() - kSymmetricHeaderSize;
+    const std::size_t chunks = chunkCount(body, limits_.sendBufferSize);
+    if (exceedsPeerLimits(limits_, body, chunks)) {
+        return sendServiceFault(requestId, responseRequestHandle(message),
+                                status::BadResponseTooLarge);
+    }
+    writeSymmetricChunks(message, MessageType::Message, channelId_, sendTokenId_, requestId,
+                         sendSequence_, limits_.sendBufferSize);
+    hooks_.write(std::move(message));
+    return true;
+}
+
+bool ServerChannel::sendServiceFault(UInt32 requestId, UInt32 requestHandle, StatusCode status) {
+    if (state_ != State::Open) return false;
+    Buffer b = newMessageBuffer();
+    BinaryEncoder e(b);
+    ServiceFault fault;
+    fault.responseHeader.timestamp = DateTime::now();
+    fault.responseHeader.requestHandle = requestHandle;
+    fault.responseHeader.serviceResult = status;
+    encode(e, encodingId<ServiceFault>());
+    encode(e, fault);
+    return send(requestId, std::move(b));
+}
+
+void ServerChannel::tick(TimePoint now) {
+    if (state_ == State::Closed) return;
+    if (state_ != State::Open && config_.helloTimeout.count() > 0 &&
+        now - started_ >= config_.helloTimeout) {
+        fail(status::BadTimeout, "no HEL / OpenSecureChannel within " +
+                                     std::to_string(config_.helloTimeout.count()) + " ms");
+        return;
+    }
+    if (config_.idleTimeout.count() > 0 && now - lastReceive_ >= config_.idleTimeout) {
+        fail(status::BadTimeout,
+             "nothing received for " + std::to_string(config_.idleTimeout.count()) + " ms");
+        return;
+    }
+    if (state_ == State::Open) {
+        dropExpiredPrevious(now);
+        if (!current_.usable(now)) fail(status::BadSecureChannelClosed, "security token expired");
+    }
+}
+
+void ServerChannel::close() {
+    if (state_ == State::Closed) return;
+    state_ = State::Closed;
+    closeStatus_ = StatusCode{};
+}
+
+void ServerChannel::fail(StatusCode status, const std::string& reason) {
+    if (state_ == State::Closed) return;
+    state_ = State::Closed;
+    closeStatus_ = status;
+    closeReason_ = reason;
+    hooks_.write(encodeMessage(ErrorMessage{status, reason}));
+}
+
+// =======================================================================================
+// ClientChannel
+// =======================================================================================
+ClientChannel::ClientChannel(const ClientConfig& config, std::string endpointUrl, Hooks& hooks)
+    : config_(config),
+      endpointUrl_(std::move(endpointUrl)),
+      hooks_(hooks),
+      reader_(readCapacity(config), std::max(config.receiveBufferSize, kMinBufferSize)) {}
+
+void ClientChannel::start(TimePoint /*now*/) {
+    hello_ = makeHello(config_, endpointUrl_);
+    state_ = State::AwaitAcknowledge;
+    hooks_.write(encodeMessage(hello_));
+}
+
+void ClientChannel::feed(const Byte* p, std::size_t n, TimePoint now) {
+    while (n > 0) {
+        if (state_ == State::Closed) return;
+        auto space = readSpace();
+        std::size_t k = std::min(n, space.size());
+        std::memcpy(space.data(), p, k);
+        received(k, now);
+        p += k;
+        n -= k;
+    }
+}
+
+void ClientChannel::received(std::size_t n, TimePoint now) {
+    reader_.commit(n);
+    if (state_ == State::Closed) {
+        reader_.clear();
+        return;
+    }
+    auto abort = [&] {
+        // Part 6 §7.1.5: a client that encounters a fatal error sends CloseSecureChannel.
+        if (state_ == State::Open) {
+            try {
+                close();
+            } catch (...) {
+            }
+        }
+        state_ = State::Closed;
+        reader_.clear();
+    };
+    try {
+        while (state_ != State::Closed) {
+            auto chunk = reader_.next();
+            if (!chunk) break;
+            handleChunk(*chunk, now);
+        }
+    } catch (const TransportError&) {
+        abort();
+        throw;
+    } catch (const DecodeError& e) {
+        abort();
+        throw TransportError(status::BadDecodingError, e.what());
+    }
+}
+
+void ClientChannel::handleChunk(const RawChunk& raw, TimePoint now) {
+    switch (raw.header.type) {
+        case MessageType::Acknowledge: {
+            if (state_ != State::AwaitAcknowledge)
+                throw TransportError(status::BadTcpMessageTypeInvalid, "unexpected ACK");
+            Acknowledge ack =
+                decodeAcknowledge(raw.data + kMessageHeaderSize, raw.size - kMessageHeaderSize);
+            limits_ = negotiateAsClient(hello_, ack, config_);
+            reader_.setMaxChunkSize(limits_.receiveBufferSize);
+            assembler_.setLimits({limits_.maxReceiveMessageSize, limits_.maxReceiveChunkCount});
+            state_ = State::AwaitOpen;
+            writeOpenRequest(false, now);
+            return;
+        }
+        case MessageType::Error: {
+            ErrorMessage err =
+                decodeError(raw.data + kMessageHeaderSize, raw.size - kMessageHeaderSize);
+            state_ = State::Closed;
+            throw TransportError(
+                err.error.isBad() ? err.error : StatusCode(status::BadUnexpectedError),
+                "server sent ERR" + (err.reason.empty() ? "" : " (" + err.reason + ")"));
+        }
+        case MessageType::OpenSecureChannel:
+        case MessageType::Message:
+            if (state_ != State::AwaitOpen && state_ != State::Open) {
+                throw TransportError(status::BadTcpMessageTypeInvalid,
+                                     std::string(toString(raw.header.type)) + " before ACK");
+            }
+            handleSecureChunk(raw, now);
+            return;
+        default:
+            throw TransportError(
+                status::BadTcpMessageTypeInvalid,
+                std::string(toString(raw.header.type)) + " is not accepted by a client");
+    }
+}
+
+void ClientChannel::checkToken(UInt32 tokenId, TimePoint now) {
+    if (tokenId == current_.tokenId) return;
+    if (previous_ && tokenId == previous_->tokenId && previous_->usable(now)) return;
+    throw TransportError(status::BadSecureChannelTokenUnknown,
+                         "token id " + std::to_string(tokenId));
+}
+
+void ClientChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
+    SecureChunk c = parseSecureChunk(raw);
+    if (c.type == MessageType::OpenSecureChannel) {
+        if (c.securityPolicyUri != kSecurityPolicyNone)
+            throw TransportError(status::BadSecurityPolicyRejected, "OPN response policy");
+        if (state_ == State::Open && c.channelId != channelId_) {
+            throw TransportError(status::BadSecureChannelIdInvalid,
+                                 "secure channel id " + std::to_string(c.channelId));
+        }
+    } else {
+        if (state_ != State::Open)
+            throw TransportError(status::BadTcpMessageTypeInvalid, "MSG before OPN response");
+        if (c.channelId != channelId_) {
+            throw TransportError(status::BadSecureChannelIdInvalid,
+                                 "secure channel id " + std::to_string(c.channelId));
+        }
+        checkToken(c.tokenId, now);
+    }
+    receiveSequence_.check(c.sequenceNumber);
+
+    auto ev = assembler_.add(c);
+    if (ev.result == MessageAssembler::Result::Incomplete) return;
+    if (ev.result == MessageAssembler::Result::Aborted) {
+        if (c.type == MessageType::OpenSecureChannel) {
+            throw TransportError(
+                ev.abortStatus.isBad() ? ev.abortStatus : StatusCode(status::BadUnexpectedError),
+                "OpenSecureChannel aborted: " + ev.abortReason);
+        }
+        IncomingResponse r;
+        r.requestId = ev.requestId;
+        r.status = ev.abortStatus.isBad() ? ev.abortStatus : StatusCode(status::BadUnexpectedError);
+        hooks_.response(std::move(r));
+        return;
+    }
+    if (ev.type == MessageType::OpenSecureChannel) {
+        handleOpenResponse(ev.requestId, ev.body, ev.size, now);
+        return;
+    }
+    BinaryDecoder d(ev.body, ev.size);
+    IncomingResponse r;
+    r.requestId = ev.requestId;
+    r.typeId = decodeTypeId(d);
+    const std::size_t prefix = ev.size - d.remaining();
+    if (ev.assembled) {
+        r.body = std::move(assembler_.assemblyBuffer());
+        r.body.erase(r.body.begin(), r.body.begin() + static_cast<std::ptrdiff_t>(prefix));
+    } else {
+        r.body.assign(d.position(), d.position() + d.remaining());
+    }
+    hooks_.response(std::move(r));
+}
+
+void ClientChannel::handleOpenResponse(UInt32 requestId, const Byte* body, std::size_t size,
+                                       TimePoint now) {
+    const bool renew = state_ == State::Open;
+    const UInt32 expected = renew ? renewRequestId_ : openRequestId_;
+    if (expected == 0 || requestId != expected) {
+        throw TransportError(status::BadUnknownResponse,
+                             "OPN response to request " + std::to_string(requestId));
+    }
+    BinaryDecoder d(body, size);
+    NodeId typeId = decodeTypeId(d);
+    if (typeId == encodingId<ServiceFault>()) {
+        ServiceFault fault;
+        decode(d, fault);
+        StatusCode s = fault.responseHeader.serviceResult;
+        throw TransportError(s.isBad() ? s : StatusCode(status::BadUnexpectedError),
+                             "OpenSecureChannel failed");
+    }
+    if (typeId != encodingId<OpenSecureChannelResponse>())
+        throw TransportError(status::BadUnknownResponse, "OPN without OpenSecureChannelResponse");
+    OpenSecureChannelResponse resp;
+    decode(d, resp);
+    if (resp.responseHeader.serviceResult.isBad())
+        throw TransportError(resp.responseHeader.serviceResult, "OpenSecureChannel failed");
+    if (resp.serverProtocolVersion != limits_.protocolVersion) {
+        throw TransportError(status::BadProtocolVersionUnsupported,
+                             "OpenSecureChannel server protocol version " +
+                                 std::to_string(resp.serverProtocolVersion));
+    }
+    const auto& tok = resp.securityToken;
+    if (renew ? tok.channelId != channelId_ : tok.channelId == 0) {
+        throw TransportError(
+            status::BadSecureChannelIdInvalid,
+            "OpenSecureChannelResponse channel id " + std::to_string(tok.channelId));
+    }
+    TokenState t;
+    t.tokenId = tok.tokenId;
+    t.created = now;
+    t.lifetime = std::chrono::milliseconds(tok.revisedLifetime ? tok.revisedLifetime
+                                                               : config_.requestedLifetime.count());
+    if (renew) {
+        previous_ = current_;
+        renewRequestId_ = 0;
+    } else {
+        channelId_ = tok.channelId;
+        openRequestId_ = 0;
+        state_ = State::Open;
+    }
+    current_ = t;
+}
+
+UInt32 ClientChannel::nextRequestId() {
+    if (++requestIdCounter_ == 0) requestIdCounter_ = 1;
+    return requestIdCounter_;
+}
+
+void ClientChannel::writeOpenRequest(bool renew, TimePoint /*now*/) {
+    const UInt32 id = nextRequestId();
+    OpenSecureChannelRequest req;
+    req.requestHeader.timestamp = DateTime::now();
+    req.requestHeader.requestHandle = id;
+    req.clientProtocolVersion = hello_.protocolVersion;
+    req.requestType = renew ? SecurityTokenRequestType::Renew : SecurityTokenRequestType::Issue;
+    req.securityMode = MessageSecurityMode::None;
+    auto lifetime = std::clamp<std::chrono::milliseconds::rep>(config_.requestedLifetime.count(), 0,
+                                                               0xFFFFFFFF);
+    req.requestedLifetime = static_cast<UInt32>(lifetime);
+    Buffer body;
+    body.reserve(128);
+    BinaryEncoder e(body);
+    encode(e, encodingId<OpenSecureChannelRequest>());
+    encode(e, req);
+    Buffer chunk =
+        makeOpenChunk(renew ? channelId_ : 0, sendSequence_.next(), id, body.data(), body.size());
+    if (renew)
+        renewRequestId_ = id;
+    else
+        openRequestId_ = id;
+    hooks_.write(std::move(chunk));
+}
+
+UInt32 ClientChannel::send(Buffer&& message) {
+    if (state_ != State::Open)
+        throw TransportError(status::BadSecureChannelClosed, "secure channel not open");
+    if (message.size() < kSymmetricHeaderSize)
+        throw std::invalid_argument("message buffer without the reserved header bytes");
+    const std::size_t body = message.size() - kSymmetricHeaderSize;
+    const std::size_t chunks = chunkCount(body, limits_.sendBufferSize);
+    if (exceedsPeerLimits(limits_, body, chunks)) {
+        throw TransportError(status::BadRequestTooLarge,
+                             "request of " + std::to_string(body) + " bytes in " +
+                                 std::to_string(chunks) + " chunks, server accepts " +
+                                 std::to_string(limits_.maxSendMessageSize) + " bytes / " +
+                                 std::to_string(limits_.maxSendChunkCount) + " chunks");
+    }
+    const UInt32 id = nextRequestId();
+    writeSymmetricChunks(message, MessageType::Message, channelId_, current_.tokenId, id,
+                         sendSequence_, limits_.sendBufferSize);
+    hooks_.write(std::move(message));
+    return id;
+}
+
+TimePoint ClientChannel::renewalDue() const {
+    if (state_ != State::Open) return TimePoint::max();
+    return current_.created + current_.lifetime * 3 / 4;
+}
+
+bool ClientChannel::renewIfDue(TimePoint now) {
+    if (state_ != State::Open || renewRequestId_ != 0 || now < renewalDue()) return false;
+    writeOpenRequest(true, now);
+    return true;
+}
+
+void ClientChannel::close() {
+    if (state_ == State::Open) {
+        state_ = State::Closed;
+        Buffer b = newMessageBuffer();
+        BinaryEncoder e(b);
+        CloseSecureChannelRequest req;
+        req.requestHeader.timestamp = DateTime::now();
+        encode(e, encodingId<CloseSecureChannelRequest>());
+        encode(e, req);
+        writeSymmetricChunks(b, MessageType::CloseSecureChannel, channelId_, current_.tokenId,
+                             nextRequestId(), sendSequence_, limits_.sendBufferSize);
+        hooks_.write(std::move(b));
+    }
+    state_ = State::Closed;
+}
+
+}  // namespace pnp::ua::transport

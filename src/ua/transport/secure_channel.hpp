@@ -1,0 +1,232 @@
+// The protocol state machines of one opc.tcp connection, without any I/O (sans-I/O):
+// ServerChannel (HEL -> ACK, OPN issue / renew, MSG, CLO) and ClientChannel (the other
+// side). TcpServer and ClientConnection feed them the bytes read from their sockets and
+// write what they produce; tests connect the two in memory.
+//
+// SecurityPolicy None only (OPC 10000-6 §6.7.2.3: asymmetric header with empty certificate
+// and thumbprint, MessageSecurityMode None).
+#pragma once
+
+#include <chrono>
+#include <optional>
+#include <span>
+#include <string>
+
+#include "ua/transport/chunks.hpp"
+
+namespace pnp::ua::transport {
+
+// A request handed to the upper layer. body / size are the encoded request after its type
+// NodeId; the pointer is valid only during the call.
+struct IncomingRequest {
+    UInt32 requestId = 0;
+    NodeId typeId;  // the binary encoding id of the request, e.g. i=631 ReadRequest
+    const Byte* body = nullptr;
+    std::size_t size = 0;
+};
+
+// A response handed to the client. For a response the server aborted with an abort chunk
+// (OPC 10000-6 §6.7.3) status is the abort chunk's Error, typeId is null and body empty;
+// otherwise status is Good.
+struct IncomingResponse {
+    UInt32 requestId = 0;
+    NodeId typeId;  // the binary encoding id of the response, e.g. i=634 ReadResponse
+    Buffer body;    // the encoded response after its type NodeId
+    StatusCode status;
+};
+
+// Transport settings of a server. The limits (TransportLimits) are announced in the
+// Acknowledge and enforced on every connection.
+struct ServerTransportConfig : TransportLimits {
+    std::string host = "0.0.0.0";  // listen address (name or literal), "::" for IPv6
+    UInt16 port = 4840;            // 0: ephemeral, see TcpServer::port()
+    // Connections beyond this are refused with an ERR BadTcpServerTooBusy.
+    std::size_t maxConnections = 1000;
+    // A connection that has not completed HEL/ACK and OpenSecureChannel within this time is
+    // closed (ERR BadTimeout).
+    std::chrono::milliseconds helloTimeout{10'000};
+    // A connection that received no byte for this long is closed (ERR BadTimeout).
+    // 0: never (token expiry still closes channels whose client vanished).
+    std::chrono::milliseconds idleTimeout{0};
+    // The revised token lifetime is the requested one clamped to [min, max].
+    std::chrono::milliseconds minTokenLifetime{10'000};
+    std::chrono::milliseconds maxTokenLifetime{3'600'000};
+};
+
+// Transport settings of a client. The limits (TransportLimits) are announced in the Hello
+// and enforced on what the client receives.
+struct ClientConfig : TransportLimits {
+    // RequestedLifetime of the OpenSecureChannel requests; renewed at 75 %.
+    std::chrono::milliseconds requestedLifetime{600'000};
+    // Deadline of ClientConnection::send() when none is given (a server that stops reading).
+    std::chrono::milliseconds sendTimeout{10'000};
+};
+
+// A SecurityToken as both sides track it. Usable until created + lifetime * 1.25: the 25 %
+// tolerance Part 4 §5.5.2.1 asks of clients, also applied by the server to cover network
+// latency and timer jitter of clients that renew at 75 %.
+struct TokenState {
+    UInt32 tokenId = 0;
+    TimePoint created{};
+    std::chrono::milliseconds lifetime{0};
+    TimePoint usableUntil() const { return created + lifetime + lifetime / 4; }
+    bool usable(TimePoint now) const { return now <= usableUntil(); }
+};
+
+// ---------------------------------------------------------------------------------------
+class ServerChannel {
+  public:
+    // Implemented by the I/O layer. Called synchronously from received(), send(), tick().
+    class Hooks {
+      public:
+        // Bytes to write: one or more complete chunks, in order.
+        virtual void write(Buffer&& bytes) = 0;
+        // A complete MSG. The I/O layer hands it to the ServiceHandler. Exceptions escaping
+        // it close the connection with ERR BadTcpInternalError.
+        virtual void request(const IncomingRequest& request) = 0;
+        // A server-wide unique secure channel id (never 0).
+        virtual UInt32 newChannelId() = 0;
+
+      protected:
+        ~Hooks() = default;
+    };
+
+    enum class State { AwaitHello, AwaitOpen, Open, Closed };
+
+    ServerChannel(const ServerTransportConfig& config, Hooks& hooks, TimePoint now);
+
+    // Input: read into readSpace(), then received(n). feed() copies (tests).
+    std::span<Byte> readSpace() { return reader_.readSpace(); }
+    void received(std::size_t n, TimePoint now);
+    void feed(const Byte* p, std::size_t n, TimePoint now);
+
+    // Sends a response built in a newMessageBuffer(): fills the headers in place, or splits
+    // it into chunks. A response larger than the client's MaxMessageSize / MaxChunkCount is
+    // replaced by a ServiceFault BadResponseTooLarge (its RequestHandle is read from the
+    // response's ResponseHeader). Against MaxMessageSize we count the body plus the chunk
+    // headers: the spec counts the body, some stacks the whole chunks; this satisfies both.
+    // False when the channel is not open (message dropped).
+    bool send(UInt32 requestId, Buffer&& message);
+    bool sendServiceFault(UInt32 requestId, UInt32 requestHandle, StatusCode status);
+
+    // Timeouts: HEL/OPN not completed in time, idle connection, token expired.
+    void tick(TimePoint now);
+    // Closes without an ERR message (CLO received, server shutdown).
+    void close();
+    // Sends ERR `status` and closes.
+    void fail(StatusCode status, const std::string& reason);
+
+    State state() const { return state_; }
+    bool isClosed() const { return state_ == State::Closed; }
+    // Why the channel closed: Good after CLO / close(), else the status of the ERR sent.
+    StatusCode closeStatus() const { return closeStatus_; }
+    const std::string& closeReason() const { return closeReason_; }
+    UInt32 channelId() const { return channelId_; }
+    const std::string& endpointUrl() const { return endpointUrl_; }
+    const NegotiatedLimits& limits() const { return limits_; }
+    UInt32 currentTokenId() const { return current_.tokenId; }
+
+  private:
+    void handleChunk(const RawChunk& raw, TimePoint now);
+    void handleHello(const RawChunk& raw);
+    void handleSecureChunk(const RawChunk& raw, TimePoint now);
+    void handleOpen(UInt32 requestId, const Byte* body, std::size_t size, TimePoint now);
+    void handleMessage(UInt32 requestId, const Byte* body, std::size_t size);
+    void checkToken(UInt32 tokenId, TimePoint now);
+    void dropExpiredPrevious(TimePoint now);
+
+    const ServerTransportConfig& config_;
+    Hooks& hooks_;
+    ChunkReader reader_;
+    MessageAssembler assembler_;
+    SequenceValidator receiveSequence_;
+    SequenceGenerator sendSequence_;
+    State state_ = State::AwaitHello;
+    StatusCode closeStatus_;
+    std::string closeReason_;
+    TimePoint started_;
+    TimePoint lastReceive_;
+    NegotiatedLimits limits_;
+    UInt32 helloVersion_ = 0;
+    std::string endpointUrl_;
+    UInt32 channelId_ = 0;
+    UInt32 nextTokenId_ = 1;
+    TokenState current_;
+    std::optional<TokenState> previous_;  // after a renew, until the client uses the new one
+    UInt32 sendTokenId_ = 0;              // the token our messages carry
+};
+
+// ---------------------------------------------------------------------------------------
+class ClientChannel {
+  public:
+    class Hooks {
+      public:
+        virtual void write(Buffer&& bytes) = 0;
+        // A complete MSG response, or an aborted one (IncomingResponse::status).
+        virtual void response(IncomingResponse&& response) = 0;
+
+      protected:
+        ~Hooks() = default;
+    };
+
+    enum class State { Idle, AwaitAcknowledge, AwaitOpen, Open, Closed };
+
+    ClientChannel(const ClientConfig& config, std::string endpointUrl, Hooks& hooks);
+
+    // Writes the Hello. The OpenSecureChannel request follows by itself on the Acknowledge.
+    void start(TimePoint now);
+
+    // Input. Throws TransportError (the channel is then Closed): the server's ERR code, or
+    // the status of a protocol violation by the server (a CLO is written first when the
+    // channel was open).
+    std::span<Byte> readSpace() { return reader_.readSpace(); }
+    void received(std::size_t n, TimePoint now);
+    void feed(const Byte* p, std::size_t n, TimePoint now);
+
+    // Sends a request built in a newMessageBuffer(); returns its request id. Throws
+    // TransportError(BadRequestTooLarge) when it exceeds the server's limits (counted like
+    // ServerChannel::send; nothing is written, the channel stays open),
+    // BadSecureChannelClosed when the channel is not open.
+    UInt32 send(Buffer&& message);
+    // Sends an OpenSecureChannel renew request when 75 % of the token lifetime has passed
+    // and none is outstanding. True when one was written.
+    bool renewIfDue(TimePoint now);
+    TimePoint renewalDue() const;
+    bool renewPending() const { return renewRequestId_ != 0; }
+    // Writes a CLO when open; the channel is Closed afterwards.
+    void close();
+
+    State state() const { return state_; }
+    bool isOpen() const { return state_ == State::Open; }
+    UInt32 channelId() const { return channelId_; }
+    UInt32 currentTokenId() const { return current_.tokenId; }
+    std::chrono::milliseconds revisedLifetime() const { return current_.lifetime; }
+    const NegotiatedLimits& limits() const { return limits_; }
+
+  private:
+    void handleChunk(const RawChunk& raw, TimePoint now);
+    void handleSecureChunk(const RawChunk& raw, TimePoint now);
+    void handleOpenResponse(UInt32 requestId, const Byte* body, std::size_t size, TimePoint now);
+    void writeOpenRequest(bool renew, TimePoint now);
+    void checkToken(UInt32 tokenId, TimePoint now);
+    UInt32 nextRequestId();
+
+    const ClientConfig config_;
+    std::string endpointUrl_;
+    Hooks& hooks_;
+    ChunkReader reader_;
+    MessageAssembler assembler_;
+    SequenceValidator receiveSequence_;
+    SequenceGenerator sendSequence_;
+    State state_ = State::Idle;
+    Hello hello_;
+    NegotiatedLimits limits_;
+    UInt32 channelId_ = 0;
+    TokenState current_;
+    std::optional<TokenState> previous_;
+    UInt32 requestIdCounter_ = 0;
+    UInt32 openRequestId_ = 0;   // outstanding Issue request
+    UInt32 renewRequestId_ = 0;  // outstanding Renew request
+};
+
+}  // namespace pnp::ua::transport

@@ -1,0 +1,127 @@
+// The opc.tcp server transport: accepts TCP connections, runs HEL/ACK and the secure
+// channel (OpenSecureChannel issue / renew, CloseSecureChannel) by itself and hands every
+// MSG request to a ServiceHandler.
+//
+// Threading: TcpServer owns ONE network thread (asio). Every callback (ServiceHandler,
+// post(), setTick()) runs on it. ServerConnection::send() / close() may be called from any
+// thread; on the network thread they act immediately, elsewhere they are posted to it.
+//
+// Usage:
+//   class Handler : public ServiceHandler {
+//       void onRequest(const std::shared_ptr<ServerConnection>& c,
+//                      const IncomingRequest& r) override {
+//           // decode r.body / r.size according to r.typeId, then:
+//           Buffer b = ServerConnection::newMessageBuffer();
+//           BinaryEncoder e(b);
+//           encode(e, NodeId(0, DataTypeInfo<ReadResponse>::binaryEncodingId));
+//           encode(e, response);
+//           c->send(r.requestId, std::move(b));
+//       }
+//   };
+//   TcpServer server(config, handler);  // handler must outlive the server
+//   server.start();                      // throws on bind failure
+//   ... server.port() ...
+//   server.stop();
+//
+// Errors on a connection (protocol violations, limits, timeouts) are answered with an ERR
+// message and close that connection only. The connection then lingers briefly (reads and
+// discards until the peer closes, at most 2 s) so that the ERR is not lost in a TCP reset.
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "ua/transport/secure_channel.hpp"
+
+namespace pnp::ua::transport {
+
+// One accepted TCP connection with its secure channel, as the upper layer sees it.
+// Thread-safe. Abstract so that the upper layer can test its handlers with a fake.
+// Do not call send() / close() after the TcpServer is destroyed (between stop() and the
+// destruction they are no-ops).
+class ServerConnection : public std::enable_shared_from_this<ServerConnection> {
+  public:
+    virtual ~ServerConnection() = default;
+
+    // The secure channel id (0 before OpenSecureChannel; requests only arrive after it).
+    virtual UInt32 channelId() const = 0;
+    // The EndpointUrl of the client's Hello. Set before the first onRequest and constant
+    // afterwards.
+    virtual const std::string& endpointUrl() const = 0;
+    // "127.0.0.1:53412", "[::1]:53412".
+    virtual std::string peerAddress() const = 0;
+
+    // A buffer for a response: kSymmetricHeaderSize bytes reserved for the headers; append
+    // the response's encoding NodeId and body with a BinaryEncoder, then send() it.
+    static Buffer newMessageBuffer() { return transport::newMessageBuffer(); }
+
+    // Sends a response to request `requestId`. Callable from any thread. The common case
+    // (one chunk) fills the headers in place without copying the body and costs one write
+    // system call. A response larger than the client accepts becomes a ServiceFault
+    // BadResponseTooLarge. Dropped silently when the connection is closed.
+    // Throws std::invalid_argument when message is shorter than kSymmetricHeaderSize.
+    virtual void send(UInt32 requestId, Buffer&& message) = 0;
+    // Sends a ServiceFault (ResponseHeader with serviceResult = status).
+    virtual void sendServiceFault(UInt32 requestId, UInt32 requestHandle, StatusCode status) = 0;
+    // Closes the connection (no ERR). Pending responses are written first. onConnectionClosed
+    // follows on the network thread.
+    virtual void close() = 0;
+
+    // True once the connection is closed or closing (any thread).
+    virtual bool isClosed() const = 0;
+};
+
+class ServiceHandler {
+  public:
+    virtual ~ServiceHandler() = default;
+    // A MSG request (OPN / CLO are handled inside the transport). On the network thread.
+    // Respond now or later (from any thread) with conn->send(request.requestId, ...).
+    virtual void onRequest(const std::shared_ptr<ServerConnection>& conn,
+                           const IncomingRequest& request) = 0;
+    // The connection is gone (peer closed, error, timeout, close(), stop()). On the network
+    // thread, once per accepted connection (not for connections refused with
+    // BadTcpServerTooBusy because maxConnections was reached).
+    virtual void onConnectionClosed(const std::shared_ptr<ServerConnection>& /*conn*/) {}
+};
+
+class TcpServer {
+  public:
+    TcpServer(ServerTransportConfig config, ServiceHandler& handler);
+    ~TcpServer();  // stop()
+    TcpServer(const TcpServer&) = delete;
+    TcpServer& operator=(const TcpServer&) = delete;
+
+    // Binds config.host:config.port, listens and starts the network thread. Throws
+    // TransportError(BadCommunicationError) when the address cannot be bound.
+    void start();
+    // Closes the listener and every connection (onConnectionClosed for each, on the network
+    // thread) and joins the network thread. Idempotent. Must not be called from the
+    // network thread.
+    void stop();
+    bool running() const;
+
+    // The bound port (the ephemeral one when config.port was 0). Valid after start().
+    UInt16 port() const;
+
+    // Runs fn on the network thread (also when called from it: queued, not run inline).
+    void post(std::function<void()> fn);
+    // True on the network thread.
+    bool isNetworkThread() const;
+    // Runs fn on the network thread every `period` (replaces an earlier tick). Callable
+    // before start() or from any thread afterwards. A period of 0 removes the tick.
+    void setTick(std::chrono::milliseconds period, std::function<void()> fn);
+
+    // Open connections (any thread; approximate while connections come and go).
+    std::size_t connectionCount() const;
+    const ServerTransportConfig& config() const;
+
+  private:
+    friend class TcpServerConnection;
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace pnp::ua::transport

@@ -1,0 +1,403 @@
+#!/usr/bin/env node
+"use strict";
+// node-opcua interop client: exercises an OPC UA server that exposes the pnp demo
+// namespace (see demo_types.js) and prints one TAP-like line per check:
+//   ok - <name>
+//   not ok - <name>: <reason>
+//   skip - <name>: <reason>
+// Exit code 0 only if every (non-skipped) check passed. The whole run is bounded
+// by a hard deadline (PNP_CLIENT_DEADLINE_MS, default 55 s).
+//
+// usage: node tests/interop/node_client.js opc.tcp://127.0.0.1:4840
+
+// node-opcua logs warnings with console.log: send all library output to stderr
+// and keep stdout for this script's own lines.
+const stdoutWrite = process.stdout.write.bind(process.stdout);
+const out = (line) => stdoutWrite(line + "\n");
+process.stdout.write = process.stderr.write.bind(process.stderr);
+
+const path = require("path");
+const os = require("os");
+const {
+    OPCUAClient,
+    OPCUACertificateManager,
+    MessageSecurityMode,
+    SecurityPolicy,
+    UserTokenType,
+    AttributeIds,
+    BrowseDirection,
+    DataType,
+    Variant,
+    VariantArrayType,
+    StatusCodes,
+    ServerState,
+    ServerStatusDataType,
+    BinaryStream,
+    coerceNodeId,
+    makeAccessLevelFlag,
+} = require("node-opcua");
+const demo = require("./demo_types");
+
+const url = process.argv[2];
+if (!url || !url.startsWith("opc.tcp://")) {
+    console.error("usage: node_client.js opc.tcp://HOST:PORT");
+    process.exit(2);
+}
+
+const DEADLINE_MS = parseInt(process.env.PNP_CLIENT_DEADLINE_MS || "55000", 10);
+const STEP_TIMEOUT_MS = parseInt(process.env.PNP_CLIENT_STEP_TIMEOUT_MS || "10000", 10);
+
+let passed = 0;
+let failed = 0;
+let skipped = 0;
+
+function summaryAndExit(code) {
+    out(`node_client: ${passed} passed, ${failed} failed, ${skipped} skipped`);
+    process.exit(code);
+}
+
+// A late failure of an operation that already timed out must not crash the run.
+process.on("unhandledRejection", (err) => {
+    console.error("[node_client] unhandled rejection:", err && err.message ? err.message : err);
+});
+
+const deadline = setTimeout(() => {
+    failed++;
+    out(`not ok - overall deadline: run exceeded ${DEADLINE_MS} ms`);
+    summaryAndExit(1);
+}, DEADLINE_MS);
+deadline.unref();
+
+function oneLine(s) {
+    s = String(s).replace(/\s+/g, " ").trim();
+    return s.length > 300 ? s.slice(0, 297) + "..." : s;
+}
+
+class Skip extends Error {}
+
+function withTimeout(promise, ms, what) {
+    let timer;
+    const t = new Promise((_, reject) => {
+        timer = setTimeout(() => reject(new Error(`timeout after ${ms} ms (${what})`)), ms);
+    });
+    return Promise.race([promise, t]).finally(() => clearTimeout(timer));
+}
+
+// Runs one check. fn returns/throws; throw Skip to report a skip. Returns true on pass.
+async function check(name, fn, timeoutMs = STEP_TIMEOUT_MS) {
+    try {
+        await withTimeout(Promise.resolve().then(fn), timeoutMs, name);
+        passed++;
+        out(`ok - ${name}`);
+        return true;
+    } catch (err) {
+        if (err instanceof Skip) {
+            skipped++;
+            out(`skip - ${name}: ${oneLine(err.message)}`);
+            return true;
+        }
+        failed++;
+        out(`not ok - ${name}: ${oneLine(err && err.message ? err.message : err)}`);
+        return false;
+    }
+}
+
+function expect(cond, msg) {
+    if (!cond) throw new Error(msg);
+}
+
+function sc(statusCode) {
+    return statusCode ? statusCode.toString() : String(statusCode);
+}
+
+function expectGood(statusCode, what) {
+    expect(statusCode && statusCode.isGood(), `${what}: status ${sc(statusCode)}`);
+}
+
+function encodeVariant(v) {
+    const stream = new BinaryStream(v.binaryStoreSize());
+    v.encode(stream);
+    return stream.buffer;
+}
+
+function describeVariant(v) {
+    try {
+        const arr = v.arrayType === VariantArrayType.Scalar ? "" : "[]";
+        return `${DataType[v.dataType]}${arr} ${oneLine(v.toString()).slice(0, 120)}`;
+    } catch (e) {
+        return "<unprintable variant>";
+    }
+}
+
+// Two variants are equal when their OPC UA binary encodings are byte-identical.
+function sameVariant(a, b) {
+    return encodeVariant(a).equals(encodeVariant(b));
+}
+
+async function main() {
+    // Keep the client's PKI (created even for SecurityPolicy None) out of $HOME.
+    const pkiRoot = process.env.PNP_NODE_PKI_DIR || path.join(os.tmpdir(), "pnp-node-opcua-pki");
+    const clientCertificateManager = new OPCUACertificateManager({
+        automaticallyAcceptUnknownCertificate: true,
+        rootFolder: path.join(pkiRoot, "client"),
+    });
+    const client = OPCUAClient.create({
+        applicationName: "pnp-interop-node-client",
+        clientCertificateManager,
+        endpointMustExist: false,
+        securityMode: MessageSecurityMode.None,
+        securityPolicy: SecurityPolicy.None,
+        connectionStrategy: { maxRetry: 2, initialDelay: 250, maxDelay: 1000 },
+        requestedSessionTimeout: 30000,
+        transportTimeout: 10000,
+        defaultTransactionTimeout: 10000,
+        keepSessionAlive: false,
+    });
+
+    // ---- connection + discovery -----------------------------------------------------
+    const connected = await check("connect (Hello/Acknowledge, OpenSecureChannel None)", async () => {
+        await client.connect(url);
+    });
+    if (!connected) {
+        summaryAndExit(1);
+    }
+
+    await check("GetEndpoints returns >=1 endpoint with SecurityPolicy None", async () => {
+        const endpoints = await client.getEndpoints();
+        expect(Array.isArray(endpoints) && endpoints.length >= 1, "no endpoints returned");
+        const none = endpoints.filter(
+            (e) => e.securityPolicyUri === SecurityPolicy.None && e.securityMode === MessageSecurityMode.None,
+        );
+        expect(none.length >= 1, `no None/None endpoint among ${endpoints.map((e) => e.securityPolicyUri).join(",")}`);
+    });
+
+    await check("GetEndpoints advertises Anonymous and UserName identity tokens", async () => {
+        const endpoints = await client.getEndpoints();
+        const tokens = endpoints
+            .filter((e) => e.securityPolicyUri === SecurityPolicy.None)
+            .flatMap((e) => e.userIdentityTokens || []);
+        const types = new Set(tokens.map((t) => t.tokenType));
+        expect(types.has(UserTokenType.Anonymous), "no Anonymous token policy");
+        expect(types.has(UserTokenType.UserName), "no UserName token policy");
+    });
+
+    // ---- anonymous session ------------------------------------------------------------
+    let session = null;
+    const haveSession = await check("CreateSession + ActivateSession (anonymous)", async () => {
+        session = await client.createSession();
+        expect(session, "no session object");
+    });
+    if (!haveSession) {
+        await client.disconnect().catch(() => {});
+        summaryAndExit(1);
+    }
+
+    let demoNs = -1;
+    await check('NamespaceArray (i=2255) contains "urn:pnp:demo"', async () => {
+        const dv = await session.read({ nodeId: "i=2255", attributeId: AttributeIds.Value });
+        expectGood(dv.statusCode, "read NamespaceArray");
+        const arr = dv.value.value;
+        expect(Array.isArray(arr), `NamespaceArray is not an array (${describeVariant(dv.value)})`);
+        expect(arr[0] === "http://opcfoundation.org/UA/", `NamespaceArray[0] = ${arr[0]}`);
+        demoNs = arr.indexOf(demo.DEMO_NS_URI);
+        expect(demoNs > 0, `"${demo.DEMO_NS_URI}" not found in [${arr.join(", ")}]`);
+    });
+    if (demoNs <= 0) {
+        await session.close().catch(() => {});
+        await client.disconnect().catch(() => {});
+        summaryAndExit(1);
+    }
+    const demoId = (s) => coerceNodeId(`ns=${demoNs};s=${s}`);
+    const DEMO = demoId("Demo");
+
+    await check("Browse ObjectsFolder (i=85) contains Server (i=2253) and Demo", async () => {
+        const br = await session.browse({
+            nodeId: "i=85",
+            browseDirection: BrowseDirection.Forward,
+            referenceTypeId: "HierarchicalReferences",
+            includeSubtypes: true,
+            nodeClassMask: 0,
+            resultMask: 0x3f,
+        });
+        expectGood(br.statusCode, "browse i=85");
+        const refs = br.references || [];
+        const ids = refs.map((r) => r.nodeId.toString());
+        expect(ids.includes("ns=0;i=2253"), `Server not found in [${ids.join(", ")}]`);
+        const d = refs.find((r) => r.nodeId.toString() === DEMO.toString());
+        expect(d, `${DEMO.toString()} not found in [${ids.join(", ")}]`);
+        expect(d.browseName.name === "Demo", `Demo browse name is ${d.browseName.toString()}`);
+    });
+
+    await check("Browse Demo lists all demo variables and methods", async () => {
+        const br = await session.browse({
+            nodeId: DEMO,
+            browseDirection: BrowseDirection.Forward,
+            referenceTypeId: "HierarchicalReferences",
+            includeSubtypes: true,
+            nodeClassMask: 0,
+            resultMask: 0x3f,
+        });
+        expectGood(br.statusCode, "browse Demo");
+        const ids = new Set((br.references || []).map((r) => r.nodeId.toString()));
+        const want = ["Demo.Echo", "Demo.Add"];
+        for (const t of demo.TYPES) want.push(`Scalar.${t.name}`, `Array.${t.name}`);
+        const missing = want.filter((s) => !ids.has(demoId(s).toString()));
+        expect(missing.length === 0, `missing: ${missing.join(", ")}`);
+    });
+
+    await check("ServerStatus (i=2256) is ExtensionObject, State Running, CurrentTime ~ now", async () => {
+        const dv = await session.read({ nodeId: "i=2256", attributeId: AttributeIds.Value });
+        expectGood(dv.statusCode, "read ServerStatus");
+        expect(dv.value.dataType === DataType.ExtensionObject, `dataType ${DataType[dv.value.dataType]}`);
+        const st = dv.value.value;
+        expect(st instanceof ServerStatusDataType, `value not decoded as ServerStatusDataType (${st && st.constructor && st.constructor.name})`);
+        expect(st.state === ServerState.Running, `state ${ServerState[st.state]} (${st.state})`);
+        const skew = Math.abs(st.currentTime.getTime() - Date.now());
+        expect(skew < 30000, `CurrentTime ${st.currentTime.toISOString()} is ${skew} ms from now`);
+        expect(st.startTime.getTime() <= st.currentTime.getTime(), "StartTime after CurrentTime");
+    });
+
+    // ---- demo variables -----------------------------------------------------------------
+    const rwMask = makeAccessLevelFlag("CurrentRead | CurrentWrite");
+    for (const t of demo.TYPES) {
+        for (const kind of ["Scalar", "Array"]) {
+            const isArray = kind === "Array";
+            const name = `${kind}.${t.name}`;
+            const nodeId = demoId(name);
+
+            await check(`${name} attributes (DataType i=${t.typeNodeId}, ValueRank ${isArray ? 1 : -1}, AccessLevel RW)`, async () => {
+                const dvs = await session.read([
+                    { nodeId, attributeId: AttributeIds.DataType },
+                    { nodeId, attributeId: AttributeIds.ValueRank },
+                    { nodeId, attributeId: AttributeIds.AccessLevel },
+                ]);
+                expectGood(dvs[0].statusCode, "DataType");
+                expectGood(dvs[1].statusCode, "ValueRank");
+                expectGood(dvs[2].statusCode, "AccessLevel");
+                const dt = dvs[0].value.value;
+                expect(dt && dt.namespace === 0 && dt.value === t.typeNodeId, `DataType is ${dt && dt.toString()}`);
+                const vr = dvs[1].value.value;
+                expect(vr === (isArray ? 1 : -1), `ValueRank is ${vr}`);
+                const al = dvs[2].value.value;
+                expect((al & rwMask) === rwMask, `AccessLevel is 0x${Number(al).toString(16)}`);
+            });
+
+            await check(`${name} write a changed value and read it back`, async () => {
+                const before = await session.read({ nodeId, attributeId: AttributeIds.Value });
+                expectGood(before.statusCode, "initial read");
+                let value = isArray ? demo.arrayVariant(t) : demo.scalarVariant(t);
+                if (sameVariant(before.value, value)) {
+                    // e.g. a second run against the same server: write the other
+                    // value so that the write always changes what is stored.
+                    value = isArray ? demo.arrayDefaultVariant(t) : demo.scalarDefaultVariant(t);
+                }
+                const ws = await session.write({ nodeId, attributeId: AttributeIds.Value, value: { value } });
+                expectGood(ws, "write");
+                const after = await session.read({ nodeId, attributeId: AttributeIds.Value });
+                expectGood(after.statusCode, "read back");
+                expect(
+                    sameVariant(after.value, value),
+                    `read back ${describeVariant(after.value)} != written ${describeVariant(value)}`,
+                );
+            });
+        }
+    }
+
+    // ---- methods ------------------------------------------------------------------------
+    await check("Call Demo.Echo(ByteString) returns the same bytes", async () => {
+        const data = Buffer.from([0x00, 0x50, 0x4e, 0x50, 0xff, 0x7f, 0x80]);
+        const res = await session.call({
+            objectId: DEMO,
+            methodId: demoId("Demo.Echo"),
+            inputArguments: [new Variant({ dataType: DataType.ByteString, value: data })],
+        });
+        expectGood(res.statusCode, "call");
+        const out = res.outputArguments || [];
+        expect(out.length === 1, `expected 1 output argument, got ${out.length}`);
+        expect(out[0].dataType === DataType.ByteString, `output dataType ${DataType[out[0].dataType]}`);
+        expect(Buffer.isBuffer(out[0].value) && out[0].value.equals(data), `got ${describeVariant(out[0])}`);
+    });
+
+    await check("Call Demo.Add(2, 3) returns Int32 5", async () => {
+        const res = await session.call({
+            objectId: DEMO,
+            methodId: demoId("Demo.Add"),
+            inputArguments: [
+                new Variant({ dataType: DataType.Int32, value: 2 }),
+                new Variant({ dataType: DataType.Int32, value: 3 }),
+            ],
+        });
+        expectGood(res.statusCode, "call");
+        const out = res.outputArguments || [];
+        expect(out.length === 1, `expected 1 output argument, got ${out.length}`);
+        expect(out[0].dataType === DataType.Int32 && out[0].value === 5, `got ${describeVariant(out[0])}`);
+    });
+
+    await check("Call Demo.Add with a String argument -> BadTypeMismatch or BadInvalidArgument", async () => {
+        const res = await session.call({
+            objectId: DEMO,
+            methodId: demoId("Demo.Add"),
+            inputArguments: [
+                new Variant({ dataType: DataType.String, value: "two" }),
+                new Variant({ dataType: DataType.Int32, value: 3 }),
+            ],
+        });
+        const okCodes = [StatusCodes.BadTypeMismatch.value, StatusCodes.BadInvalidArgument.value];
+        expect(okCodes.includes(res.statusCode.value), `status ${sc(res.statusCode)}`);
+    });
+
+    await check("Read of an unknown node -> BadNodeIdUnknown", async () => {
+        const dv = await session.read({ nodeId: demoId("Does.Not.Exist"), attributeId: AttributeIds.Value });
+        expect(dv.statusCode.value === StatusCodes.BadNodeIdUnknown.value, `status ${sc(dv.statusCode)}`);
+    });
+
+    await check("CloseSession (anonymous)", async () => {
+        await session.close();
+        session = null;
+    });
+
+    // ---- username sessions ----------------------------------------------------------------
+    await check("CreateSession with username operator/secret, read ServerStatus, close", async () => {
+        const s = await client.createSession({
+            type: UserTokenType.UserName,
+            userName: "operator",
+            password: "secret",
+        });
+        try {
+            const dv = await s.read({ nodeId: "i=2259", attributeId: AttributeIds.Value });
+            expectGood(dv.statusCode, "read ServerStatus.State");
+            expect(dv.value.value === ServerState.Running, `State = ${dv.value.value}`);
+        } finally {
+            await s.close();
+        }
+    });
+
+    await check("CreateSession with a wrong password -> BadUserAccessDenied/BadIdentityToken*", async () => {
+        let s = null;
+        try {
+            s = await client.createSession({
+                type: UserTokenType.UserName,
+                userName: "operator",
+                password: "wrong-password",
+            });
+        } catch (err) {
+            const msg = String(err && err.message);
+            expect(/Bad(UserAccessDenied|IdentityTokenRejected|IdentityTokenInvalid)/.test(msg), `unexpected error: ${msg}`);
+            return;
+        }
+        await s.close().catch(() => {});
+        throw new Error("session with a wrong password was activated");
+    });
+
+    await check("Disconnect (CloseSecureChannel)", async () => {
+        await client.disconnect();
+    });
+
+    summaryAndExit(failed === 0 ? 0 : 1);
+}
+
+main().catch((err) => {
+    failed++;
+    out(`not ok - unexpected error: ${oneLine(err && err.stack ? err.stack : err)}`);
+    summaryAndExit(1);
+});

@@ -1,0 +1,165 @@
+// A child process for tests: fork/exec, stdout through a pipe (to wait for a line such as
+// "READY" with a bounded timeout), stderr into a log file, stopped by its PID (SIGTERM, then
+// SIGKILL) in the destructor even when the test failed. The child also gets SIGTERM if the
+// test process dies (PR_SET_PDEATHSIG).
+#pragma once
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/prctl.h>
+#include <sys/stat.h>
+#include <sys/types.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace pnp::testing {
+
+// The full path of an executable found in PATH, or "".
+inline std::string findInPath(const std::string& name) {
+    const char* path = std::getenv("PATH");
+    if (!path) return {};
+    std::stringstream ss(path);
+    std::string dir;
+    while (std::getline(ss, dir, ':')) {
+        if (dir.empty()) continue;
+        std::string p = dir + "/" + name;
+        if (::access(p.c_str(), X_OK) == 0) return p;
+    }
+    return {};
+}
+
+inline bool fileExists(const std::string& p) {
+    struct stat st{};
+    return ::stat(p.c_str(), &st) == 0;
+}
+
+class ChildProcess {
+public:
+    ChildProcess() = default;
+    ChildProcess(const ChildProcess&) = delete;
+    ChildProcess& operator=(const ChildProcess&) = delete;
+    ~ChildProcess() { stop(); }
+
+    // Starts argv[0] (a full path) with argv; stderr goes to logPath.
+    bool start(const std::vector<std::string>& argv, const std::string& logPath,
+               std::string& error) {
+        int fds[2];
+        if (::pipe2(fds, O_CLOEXEC) != 0) {
+            error = "pipe failed";
+            return false;
+        }
+        logPath_ = logPath;
+        pid_t parent = ::getpid();
+        pid_ = ::fork();
+        if (pid_ < 0) {
+            error = "fork failed";
+            ::close(fds[0]);
+            ::close(fds[1]);
+            return false;
+        }
+        if (pid_ == 0) {
+            // Child: only async-signal-safe calls until exec.
+            ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+            if (::getppid() != parent) ::_exit(127);
+            ::dup2(fds[1], STDOUT_FILENO);
+            int log = ::open(logPath.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+            if (log >= 0) ::dup2(log, STDERR_FILENO);
+            int devnull = ::open("/dev/null", O_RDONLY);
+            if (devnull >= 0) ::dup2(devnull, STDIN_FILENO);
+            std::vector<char*> args;
+            for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+            args.push_back(nullptr);
+            ::execv(args[0], args.data());
+            ::_exit(127);
+        }
+        ::close(fds[1]);
+        out_ = fds[0];
+        return true;
+    }
+
+    // Reads stdout until a line equal to `line` arrives, the child exits or the timeout.
+    bool waitForLine(const std::string& line, std::chrono::milliseconds timeout,
+                     std::string& error) {
+        auto end = std::chrono::steady_clock::now() + timeout;
+        std::string buf;
+        for (;;) {
+            std::size_t nl;
+            while ((nl = buf.find('\n')) != std::string::npos) {
+                std::string l = buf.substr(0, nl);
+                buf.erase(0, nl + 1);
+                if (!l.empty() && l.back() == '\r') l.pop_back();
+                if (l == line) return true;
+            }
+            auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+                end - std::chrono::steady_clock::now());
+            if (left.count() <= 0) {
+                error = "no \"" + line + "\" within " + std::to_string(timeout.count()) + " ms";
+                return false;
+            }
+            pollfd p{out_, POLLIN, 0};
+            int n = ::poll(&p, 1, static_cast<int>(left.count()));
+            if (n < 0) continue;
+            if (n == 0) continue;
+            char tmp[512];
+            ssize_t r = ::read(out_, tmp, sizeof tmp);
+            if (r <= 0) {
+                error = "the process exited before printing \"" + line + "\"";
+                return false;
+            }
+            buf.append(tmp, static_cast<std::size_t>(r));
+        }
+    }
+
+    // SIGTERM, up to `grace` to exit, then SIGKILL. Idempotent.
+    void stop(std::chrono::milliseconds grace = std::chrono::milliseconds(5000)) {
+        if (pid_ > 0) {
+            ::kill(pid_, SIGTERM);
+            auto end = std::chrono::steady_clock::now() + grace;
+            int status = 0;
+            bool reaped = false;
+            while (std::chrono::steady_clock::now() < end) {
+                pid_t r = ::waitpid(pid_, &status, WNOHANG);
+                if (r == pid_ || r < 0) {
+                    reaped = true;
+                    break;
+                }
+                std::this_thread::sleep_for(std::chrono::milliseconds(20));
+            }
+            if (!reaped) {
+                ::kill(pid_, SIGKILL);
+                ::waitpid(pid_, &status, 0);
+            }
+            pid_ = -1;
+        }
+        if (out_ >= 0) {
+            ::close(out_);
+            out_ = -1;
+        }
+    }
+
+    pid_t pid() const { return pid_; }
+    bool running() const { return pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) == 0; }
+
+    // The last `max` bytes of the stderr log.
+    std::string logTail(std::size_t max = 4000) const {
+        std::ifstream f(logPath_);
+        std::string s((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+        return s.size() > max ? s.substr(s.size() - max) : s;
+    }
+
+private:
+    pid_t pid_ = -1;
+    int out_ = -1;
+    std::string logPath_;
+};
+
+}  // namespace pnp::testing
