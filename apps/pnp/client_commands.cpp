@@ -48,8 +48,9 @@ std::unique_ptr<uac::Client> connect(const ClientOptions& o) {
     return client;
 }
 
-void printJson(const Json& j) { std::cout << j.dump(2, ' ', false, Json::error_handler_t::replace) << '\n'; }
-
+void printJson(const Json& j) {
+    std::cout << j.dump(2, ' ', false, Json::error_handler_t::replace) << '\n';
+}
 
 // ---- nodes -------------------------------------------------------------------------------
 constexpr const char* kNodeForms =
@@ -67,8 +68,7 @@ void checkNodeText(const std::string& text) {
         return;
     }
     auto x = ExpandedNodeId::parse(text);
-    if (!x || x->serverIndex != 0)
-        throw UsageError("invalid node \"" + text + "\": " + kNodeForms);
+    if (!x || x->serverIndex != 0) throw UsageError("invalid node \"" + text + "\": " + kNodeForms);
 }
 
 bool isPath(const std::string& text) {
@@ -99,13 +99,34 @@ std::string nodeName(const ExpandedNodeId& id) {
 
 // ---- attributes --------------------------------------------------------------------------
 constexpr const char* kAttributeNames[] = {
-    "",          "NodeId",          "NodeClass",          "BrowseName",
-    "DisplayName", "Description",   "WriteMask",          "UserWriteMask",
-    "IsAbstract", "Symmetric",      "InverseName",        "ContainsNoLoops",
-    "EventNotifier", "Value",       "DataType",           "ValueRank",
-    "ArrayDimensions", "AccessLevel", "UserAccessLevel",  "MinimumSamplingInterval",
-    "Historizing", "Executable",    "UserExecutable",     "DataTypeDefinition",
-    "RolePermissions", "UserRolePermissions", "AccessRestrictions", "AccessLevelEx",
+    "",
+    "NodeId",
+    "NodeClass",
+    "BrowseName",
+    "DisplayName",
+    "Description",
+    "WriteMask",
+    "UserWriteMask",
+    "IsAbstract",
+    "Symmetric",
+    "InverseName",
+    "ContainsNoLoops",
+    "EventNotifier",
+    "Value",
+    "DataType",
+    "ValueRank",
+    "ArrayDimensions",
+    "AccessLevel",
+    "UserAccessLevel",
+    "MinimumSamplingInterval",
+    "Historizing",
+    "Executable",
+    "UserExecutable",
+    "DataTypeDefinition",
+    "RolePermissions",
+    "UserRolePermissions",
+    "AccessRestrictions",
+    "AccessLevelEx",
 };
 constexpr UInt32 kAttributeCount = sizeof(kAttributeNames) / sizeof(kAttributeNames[0]);
 
@@ -124,15 +145,16 @@ UInt32 parseAttribute(const std::string& text) {
     } catch (const std::exception&) {
     }
     std::string names;
-    for (UInt32 i = 1; i < kAttributeCount; ++i) names += std::string(i > 1 ? ", " : "") + kAttributeNames[i];
+    for (UInt32 i = 1; i < kAttributeCount; ++i)
+        names += std::string(i > 1 ? ", " : "") + kAttributeNames[i];
     throw UsageError("unknown attribute \"" + text + "\"; one of: " + names);
 }
 
 std::string accessLevelText(UInt32 bits) {
     static constexpr std::pair<UInt32, const char*> kBits[] = {
-        {0x1, "CurrentRead"},     {0x2, "CurrentWrite"},      {0x4, "HistoryRead"},
-        {0x8, "HistoryWrite"},    {0x10, "SemanticChange"},   {0x20, "StatusWrite"},
-        {0x40, "TimestampWrite"}, {0x100, "NonatomicRead"},   {0x200, "NonatomicWrite"},
+        {0x1, "CurrentRead"},          {0x2, "CurrentWrite"},     {0x4, "HistoryRead"},
+        {0x8, "HistoryWrite"},         {0x10, "SemanticChange"},  {0x20, "StatusWrite"},
+        {0x40, "TimestampWrite"},      {0x100, "NonatomicRead"},  {0x200, "NonatomicWrite"},
         {0x400, "WriteFullArrayOnly"}, {0x800, "NoSubDataTypes"}, {0x1000, "NonVolatile"},
         {0x2000, "Constant"}};
     std::string s;
@@ -143,12 +165,18 @@ std::string accessLevelText(UInt32 bits) {
 
 std::string valueRankText(Int32 r) {
     switch (r) {
-        case -3: return "ScalarOrOneDimension";
-        case -2: return "Any";
-        case -1: return "Scalar";
-        case 0: return "OneOrMoreDimensions";
-        case 1: return "OneDimension";
-        default: return r > 1 ? std::to_string(r) + " dimensions" : "";
+        case -3:
+            return "ScalarOrOneDimension";
+        case -2:
+            return "Any";
+        case -1:
+            return "Scalar";
+        case 0:
+            return "OneOrMoreDimensions";
+        case 1:
+            return "OneDimension";
+        default:
+            return r > 1 ? std::to_string(r) + " dimensions" : "";
     }
 }
 
@@ -156,7 +184,8 @@ std::string valueRankText(Int32 r) {
 std::string attributeValueName(UInt32 attr, const Variant& v) {
     switch (static_cast<AttributeId>(attr)) {
         case AttributeId::NodeClass:
-            if (auto* i = v.scalar<Int32>()) return std::string(toString(static_cast<NodeClass>(*i)));
+            if (auto* i = v.scalar<Int32>())
+                return std::string(toString(static_cast<NodeClass>(*i)));
             break;
         case AttributeId::DataType:
             if (auto* n = v.scalar<NodeId>()) return ns0Name(*n);
@@ -171,7 +200,8 @@ std::string attributeValueName(UInt32 attr, const Variant& v) {
         case AttributeId::AccessLevelEx:
             if (auto* u = v.scalar<UInt32>()) return accessLevelText(*u);
             break;
-        default: break;
+        default:
+            break;
     }
     return {};
 }
@@ -180,12 +210,18 @@ std::string attributeValueName(UInt32 attr, const Variant& v) {
 std::optional<BuiltinType> ns0BuiltinType(UInt32 id) {
     if (id >= 1 && id <= 21) return static_cast<BuiltinType>(id);
     switch (id) {
-        case ns0::Structure: return BuiltinType::ExtensionObject;
-        case ns0::DataValue: return BuiltinType::DataValue;
-        case ns0::BaseDataType: return BuiltinType::Variant;
-        case ns0::DiagnosticInfo: return BuiltinType::DiagnosticInfo;
-        case ns0::Enumeration: return BuiltinType::Int32;
-        default: return std::nullopt;
+        case ns0::Structure:
+            return BuiltinType::ExtensionObject;
+        case ns0::DataValue:
+            return BuiltinType::DataValue;
+        case ns0::BaseDataType:
+            return BuiltinType::Variant;
+        case ns0::DiagnosticInfo:
+            return BuiltinType::DiagnosticInfo;
+        case ns0::Enumeration:
+            return BuiltinType::Int32;
+        default:
+            return std::nullopt;
     }
 }
 
@@ -200,7 +236,7 @@ BuiltinType builtinTypeOf(uac::Client& c, NodeId dataType, const Variant& curren
             if (id == ns0::Number || id == ns0::Integer || id == ns0::UInteger) {
                 if (!current.isEmpty() && current.type() != BuiltinType::Variant)
                     return current.type();
-                return id == ns0::Number ? BuiltinType::Double
+                return id == ns0::Number    ? BuiltinType::Double
                        : id == ns0::Integer ? BuiltinType::Int64
                                             : BuiltinType::UInt64;
             }
@@ -247,8 +283,7 @@ std::string enumValueName(uac::Client& c, const NodeId& dataType, Int64 value) {
             p.relativePath.elements.push_back(e);
             auto res = c.translateBrowsePaths({p});
             if (res.empty() || res[0].statusCode.isBad() || res[0].targets.empty()) continue;
-            DataValue dv =
-                c.readAttribute(res[0].targets[0].targetId.nodeId, AttributeId::Value);
+            DataValue dv = c.readAttribute(res[0].targets[0].targetId.nodeId, AttributeId::Value);
             if (!dv.value) continue;
             if (auto* texts = dv.value->array<LocalizedText>()) {
                 if (value >= 0 && static_cast<std::size_t>(value) < texts->size())
@@ -288,8 +323,10 @@ ParseOptions parseOptionsFor(uac::Client& c) {
 
 std::pair<BuiltinType, Shape> parseTypeOption(const std::string& text) {
     auto t = parseTypeName(text);
-    if (!t) throw UsageError("unknown type \"" + text + "\" (a built-in type name like Int32, "
-                             "Double[], String, LocalizedText, ExtensionObject)");
+    if (!t)
+        throw UsageError("unknown type \"" + text +
+                         "\" (a built-in type name like Int32, "
+                         "Double[], String, LocalizedText, ExtensionObject)");
     return *t;
 }
 
@@ -307,19 +344,18 @@ int runEndpoints(const ClientOptions& o) {
                 tokens.push_back({{"policyId", t.policyId},
                                   {"tokenType", std::string(toString(t.tokenType))},
                                   {"securityPolicyUri", t.securityPolicyUri}});
-            list.push_back(
-                {{"endpointUrl", e.endpointUrl},
-                 {"securityMode", std::string(toString(e.securityMode))},
-                 {"securityPolicyUri", e.securityPolicyUri},
-                 {"securityLevel", e.securityLevel},
-                 {"transportProfileUri", e.transportProfileUri},
-                 {"userIdentityTokens", tokens},
-                 {"server",
-                  {{"applicationUri", e.server.applicationUri},
-                   {"productUri", e.server.productUri},
-                   {"applicationName", e.server.applicationName.text},
-                   {"applicationType", std::string(toString(e.server.applicationType))},
-                   {"discoveryUrls", e.server.discoveryUrls}}}});
+            list.push_back({{"endpointUrl", e.endpointUrl},
+                            {"securityMode", std::string(toString(e.securityMode))},
+                            {"securityPolicyUri", e.securityPolicyUri},
+                            {"securityLevel", e.securityLevel},
+                            {"transportProfileUri", e.transportProfileUri},
+                            {"userIdentityTokens", tokens},
+                            {"server",
+                             {{"applicationUri", e.server.applicationUri},
+                              {"productUri", e.server.productUri},
+                              {"applicationName", e.server.applicationName.text},
+                              {"applicationType", std::string(toString(e.server.applicationType))},
+                              {"discoveryUrls", e.server.discoveryUrls}}}});
         }
         printJson({{"url", o.url}, {"endpoints", list}});
         return kExitOk;
@@ -336,7 +372,8 @@ int runEndpoints(const ClientOptions& o) {
         for (const auto& u : e.userIdentityTokens)
             tokens += (tokens.empty() ? "" : ", ") + std::string(toString(u.tokenType));
         std::string policy = e.securityPolicyUri;
-        if (auto hash = policy.rfind('#'); hash != std::string::npos) policy = policy.substr(hash + 1);
+        if (auto hash = policy.rfind('#'); hash != std::string::npos)
+            policy = policy.substr(hash + 1);
         t.add({e.endpointUrl, std::string(toString(e.securityMode)), policy, tokens,
                std::to_string(e.securityLevel)});
     }
@@ -470,14 +507,16 @@ int runRead(const ClientOptions& o, const ReadOptions& r) {
         if (!name.empty()) j["valueName"] = name;
         if (!v.arrayDimensions().empty()) j["arrayDimensions"] = v.arrayDimensions();
         if (isValue && !it.dataType.isNull()) j["dataType"] = it.dataType.toString();
-        if (it.value.sourceTimestamp) j["sourceTimestamp"] = dateTimeText(*it.value.sourceTimestamp);
-        if (it.value.serverTimestamp) j["serverTimestamp"] = dateTimeText(*it.value.serverTimestamp);
+        if (it.value.sourceTimestamp)
+            j["sourceTimestamp"] = dateTimeText(*it.value.sourceTimestamp);
+        if (it.value.serverTimestamp)
+            j["serverTimestamp"] = dateTimeText(*it.value.serverTimestamp);
         results.push_back(std::move(j));
 
         std::string text = v.isEmpty() && st.isBad() ? "" : toText(v);
         if (!name.empty()) text = name + " (" + text + ")";
-        table.add({it.text, kAttributeNames[attr], statusText(st), v.isEmpty() ? "" : typeText(v),
-                   text});
+        table.add(
+            {it.text, kAttributeNames[attr], statusText(st), v.isEmpty() ? "" : typeText(v), text});
     }
     if (o.json)
         printJson({{"results", results}});
@@ -502,18 +541,21 @@ int runWrite(const ClientOptions& o, const WriteOptions& w) {
         req[1].attributeId = static_cast<UInt32>(AttributeId::ValueRank);
         req[2].attributeId = static_cast<UInt32>(AttributeId::Value);
         auto res = client->read(req, TimestampsToReturn::Neither);
-        if (res.size() != 3) throw uac::Error(status::BadUnexpectedError, "Read: wrong result count");
+        if (res.size() != 3)
+            throw uac::Error(status::BadUnexpectedError, "Read: wrong result count");
         for (int i = 0; i < 2; ++i) {
             if (res[i].statusOrGood().isBad()) {
                 StatusCode st = res[i].statusOrGood();
-                throw uac::Error(st, "cannot read the " + std::string(i == 0 ? "DataType" : "ValueRank") +
-                                         " of " + w.node);
+                throw uac::Error(st, "cannot read the " +
+                                         std::string(i == 0 ? "DataType" : "ValueRank") + " of " +
+                                         w.node);
             }
         }
         const NodeId* dt = res[0].value ? res[0].value->scalar<NodeId>() : nullptr;
         const Int32* rank = res[1].value ? res[1].value->scalar<Int32>() : nullptr;
         if (dt == nullptr || rank == nullptr)
-            throw uac::Error(status::BadTypeMismatch, w.node + " has no DataType / ValueRank (not a Variable?)");
+            throw uac::Error(status::BadTypeMismatch,
+                             w.node + " has no DataType / ValueRank (not a Variable?)");
         const Variant current = res[2].value ? *res[2].value : Variant();
         type = {builtinTypeOf(*client, *dt, current), shapeOfValueRank(*rank)};
     }
@@ -538,7 +580,7 @@ int runWrite(const ClientOptions& o, const WriteOptions& w) {
 namespace {
 // The InputArguments / OutputArguments properties of a method (empty when absent).
 std::pair<std::vector<Argument>, std::vector<Argument>> methodArguments(uac::Client& c,
-                                                                         const NodeId& method) {
+                                                                        const NodeId& method) {
     std::vector<BrowsePath> paths;
     for (const char* name : {"InputArguments", "OutputArguments"}) {
         BrowsePath p;
@@ -609,17 +651,17 @@ int runCall(const ClientOptions& o, const CallOptions& c) {
     ParseOptions po = parseOptionsFor(*client);
     if (!explicitTypes.empty()) {
         for (std::size_t i = 0; i < c.args.size(); ++i)
-            inputs.push_back(parseValue(c.args[i], explicitTypes[i].first,
-                                        explicitTypes[i].second, po));
+            inputs.push_back(
+                parseValue(c.args[i], explicitTypes[i].first, explicitTypes[i].second, po));
     } else {
         if (inArgs.size() != c.args.size())
-            throw UsageError("the method takes " + std::to_string(inArgs.size()) +
-                             " argument(s) " + signature(inArgs, *client) + ", got " +
-                             std::to_string(c.args.size()));
+            throw UsageError("the method takes " + std::to_string(inArgs.size()) + " argument(s) " +
+                             signature(inArgs, *client) + ", got " + std::to_string(c.args.size()));
         for (std::size_t i = 0; i < c.args.size(); ++i) {
             BuiltinType t = builtinTypeOf(*client, inArgs[i].dataType, {});
             try {
-                inputs.push_back(parseValue(c.args[i], t, shapeOfValueRank(inArgs[i].valueRank), po));
+                inputs.push_back(
+                    parseValue(c.args[i], t, shapeOfValueRank(inArgs[i].valueRank), po));
             } catch (const ValueError& e) {
                 throw ValueError("argument " + std::to_string(i + 1) + " (" + inArgs[i].name +
                                  "): " + e.what());
@@ -656,8 +698,8 @@ int runCall(const ClientOptions& o, const CallOptions& c) {
         for (std::size_t i = 0; i < r.inputArgumentResults.size(); ++i) {
             if (r.inputArgumentResults[i].isGood()) continue;
             std::cout << "  input " << i + 1
-                      << (i < inArgs.size() ? " (" + inArgs[i].name + ")" : std::string())
-                      << ": " << statusText(r.inputArgumentResults[i]) << "\n";
+                      << (i < inArgs.size() ? " (" + inArgs[i].name + ")" : std::string()) << ": "
+                      << statusText(r.inputArgumentResults[i]) << "\n";
         }
         if (!r.outputs.empty()) {
             std::cout << "\n";

@@ -53,7 +53,8 @@ int main(int argc, char** argv) {
     app.set_version_flag("--version", "pnp 0.1.0");
     app.footer("Run `pnp ua --help` for the OPC UA tools.");
 
-    CLI::App* ua = app.add_subcommand("ua", "OPC UA tools: a demo server and a command-line client");
+    CLI::App* ua =
+        app.add_subcommand("ua", "OPC UA tools: a demo server and a command-line client");
     ua->require_subcommand(1);
     ua->footer(
         "Exit codes: 0 ok, 1 OPC UA error (status name printed), 2 usage error.\n"
@@ -68,21 +69,24 @@ int main(int argc, char** argv) {
     ServeOptions serveOpts;
     CLI::App* serve = ua->add_subcommand(
         "serve", "run an OPC UA server: namespace 0 + demo namespace urn:pnp:demo");
-    serve->add_option("--port", serveOpts.port, "TCP port (0: any free port)")->capture_default_str();
+    serve->add_option("--port", serveOpts.port, "TCP port (0: any free port)")
+        ->capture_default_str();
     serve->add_option("--host", serveOpts.host, "address to listen on")->capture_default_str();
     serve->add_option("--user", serveOpts.users, "accept user NAME:PASSWORD (repeatable)");
     serve->add_flag("--no-anonymous", serveOpts.noAnonymous, "refuse anonymous sessions");
     serve->footer("Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM.");
 
     ClientOptions epOpts;
-    CLI::App* endpoints = ua->add_subcommand("endpoints", "list the server's endpoints (GetEndpoints)");
+    CLI::App* endpoints =
+        ua->add_subcommand("endpoints", "list the server's endpoints (GetEndpoints)");
     addClientOptions(endpoints, epOpts);
 
     ClientOptions brOpts;
     BrowseOptions browseOpts;
     CLI::App* browse = ua->add_subcommand("browse", "list the hierarchical references of a node");
     addClientOptions(browse, brOpts);
-    browse->add_option("NODE", browseOpts.node, std::string("start ") + kNodeHelp)->capture_default_str();
+    browse->add_option("NODE", browseOpts.node, std::string("start ") + kNodeHelp)
+        ->capture_default_str();
     browse->add_option("--depth", browseOpts.depth, "levels to descend")
         ->capture_default_str()
         ->check(CLI::Range(1, 64));
@@ -101,8 +105,9 @@ int main(int argc, char** argv) {
     CLI::App* write = ua->add_subcommand("write", "write the Value of a variable");
     addClientOptions(write, wrOpts);
     write->add_option("NODE", writeOpts.node, kNodeHelp)->required();
-    write->add_option("VALUE", writeOpts.value,
-                      "the value as text; arrays as JSON arrays [1,2,3] (see apps/pnp/README.md)")
+    write
+        ->add_option("VALUE", writeOpts.value,
+                     "the value as text; arrays as JSON arrays [1,2,3] (see apps/pnp/README.md)")
         ->required();
     write->add_option("--type", writeOpts.type,
                       "built-in type, e.g. Int32, Double[], LocalizedText (default: the node's "
@@ -112,7 +117,8 @@ int main(int argc, char** argv) {
     CallOptions callOpts;
     CLI::App* call = ua->add_subcommand("call", "call a method");
     addClientOptions(call, clOpts);
-    call->add_option("OBJECT", callOpts.object, "the object (or type) owning the method")->required();
+    call->add_option("OBJECT", callOpts.object, "the object (or type) owning the method")
+        ->required();
     call->add_option("METHOD", callOpts.method, "the method")->required();
     call->add_option("ARG", callOpts.args,
                      "input arguments as text, typed by the method's InputArguments (use -- "

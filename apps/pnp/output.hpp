@@ -17,20 +17,20 @@ enum ExitCode : int {
 
 // A command line the tool cannot act on (exit code 2).
 class UsageError : public std::invalid_argument {
-public:
+  public:
     using std::invalid_argument::invalid_argument;
 };
 
 // Columns aligned by the display width of their cells (UTF-8 aware); the last column is
 // not padded. Cells must not contain line breaks (they are replaced by spaces).
 class Table {
-public:
+  public:
     explicit Table(std::vector<std::string> headers) : headers_(std::move(headers)) {}
     void add(std::vector<std::string> row) { rows_.push_back(std::move(row)); }
     bool empty() const { return rows_.empty(); }
     void print(std::ostream& out) const;
 
-private:
+  private:
     std::vector<std::string> headers_;
     std::vector<std::vector<std::string>> rows_;
 };

@@ -59,8 +59,8 @@ int runServe(const ServeOptions& o) {
         return kExitUaError;
     }
     std::cout << "listening on " << server.endpointUrl() << std::endl;  // flushed
-    std::cerr << "pnp ua serve: namespace " << demo::kNamespaceUri << " is ns="
-              << demoNamespace.namespaceIndex() << "; anonymous "
+    std::cerr << "pnp ua serve: namespace " << demo::kNamespaceUri
+              << " is ns=" << demoNamespace.namespaceIndex() << "; anonymous "
               << (o.noAnonymous ? "refused" : "allowed") << "; " << o.users.size()
               << " user(s); stop with Ctrl-C or SIGTERM" << std::endl;
 

@@ -33,32 +33,58 @@ struct IsVector<std::vector<T>> : std::true_type {};
 template <class F>
 decltype(auto) withType(BuiltinType t, F&& f) {
     switch (t) {
-        case BuiltinType::Boolean: return f(Tag<Boolean>{});
-        case BuiltinType::SByte: return f(Tag<SByte>{});
-        case BuiltinType::Byte: return f(Tag<Byte>{});
-        case BuiltinType::Int16: return f(Tag<Int16>{});
-        case BuiltinType::UInt16: return f(Tag<UInt16>{});
-        case BuiltinType::Int32: return f(Tag<Int32>{});
-        case BuiltinType::UInt32: return f(Tag<UInt32>{});
-        case BuiltinType::Int64: return f(Tag<Int64>{});
-        case BuiltinType::UInt64: return f(Tag<UInt64>{});
-        case BuiltinType::Float: return f(Tag<Float>{});
-        case BuiltinType::Double: return f(Tag<Double>{});
-        case BuiltinType::String: return f(Tag<String>{});
-        case BuiltinType::DateTime: return f(Tag<DateTime>{});
-        case BuiltinType::Guid: return f(Tag<Guid>{});
-        case BuiltinType::ByteString: return f(Tag<ByteString>{});
-        case BuiltinType::XmlElement: return f(Tag<XmlElement>{});
-        case BuiltinType::NodeId: return f(Tag<NodeId>{});
-        case BuiltinType::ExpandedNodeId: return f(Tag<ExpandedNodeId>{});
-        case BuiltinType::StatusCode: return f(Tag<StatusCode>{});
-        case BuiltinType::QualifiedName: return f(Tag<QualifiedName>{});
-        case BuiltinType::LocalizedText: return f(Tag<LocalizedText>{});
-        case BuiltinType::ExtensionObject: return f(Tag<ExtensionObject>{});
-        case BuiltinType::DataValue: return f(Tag<DataValue>{});
-        case BuiltinType::Variant: return f(Tag<Variant>{});
-        case BuiltinType::DiagnosticInfo: return f(Tag<DiagnosticInfo>{});
-        case BuiltinType::Null: break;
+        case BuiltinType::Boolean:
+            return f(Tag<Boolean>{});
+        case BuiltinType::SByte:
+            return f(Tag<SByte>{});
+        case BuiltinType::Byte:
+            return f(Tag<Byte>{});
+        case BuiltinType::Int16:
+            return f(Tag<Int16>{});
+        case BuiltinType::UInt16:
+            return f(Tag<UInt16>{});
+        case BuiltinType::Int32:
+            return f(Tag<Int32>{});
+        case BuiltinType::UInt32:
+            return f(Tag<UInt32>{});
+        case BuiltinType::Int64:
+            return f(Tag<Int64>{});
+        case BuiltinType::UInt64:
+            return f(Tag<UInt64>{});
+        case BuiltinType::Float:
+            return f(Tag<Float>{});
+        case BuiltinType::Double:
+            return f(Tag<Double>{});
+        case BuiltinType::String:
+            return f(Tag<String>{});
+        case BuiltinType::DateTime:
+            return f(Tag<DateTime>{});
+        case BuiltinType::Guid:
+            return f(Tag<Guid>{});
+        case BuiltinType::ByteString:
+            return f(Tag<ByteString>{});
+        case BuiltinType::XmlElement:
+            return f(Tag<XmlElement>{});
+        case BuiltinType::NodeId:
+            return f(Tag<NodeId>{});
+        case BuiltinType::ExpandedNodeId:
+            return f(Tag<ExpandedNodeId>{});
+        case BuiltinType::StatusCode:
+            return f(Tag<StatusCode>{});
+        case BuiltinType::QualifiedName:
+            return f(Tag<QualifiedName>{});
+        case BuiltinType::LocalizedText:
+            return f(Tag<LocalizedText>{});
+        case BuiltinType::ExtensionObject:
+            return f(Tag<ExtensionObject>{});
+        case BuiltinType::DataValue:
+            return f(Tag<DataValue>{});
+        case BuiltinType::Variant:
+            return f(Tag<Variant>{});
+        case BuiltinType::DiagnosticInfo:
+            return f(Tag<DiagnosticInfo>{});
+        case BuiltinType::Null:
+            break;
     }
     throw ValueError("a value cannot be of type Null");
 }
@@ -309,8 +335,7 @@ T parseScalar(std::string_view text, const ParseOptions& opt) {
                 try {
                     auto t = json::parse(s.substr(0, at + 1));
                     if (t.is_string())
-                        return LocalizedText(std::string(s.substr(at + 2)),
-                                             t.get<std::string>());
+                        return LocalizedText(std::string(s.substr(at + 2)), t.get<std::string>());
                 } catch (const json::parse_error&) {
                 }
             }
@@ -567,9 +592,8 @@ Variant variantFromJson(const json& j, const ParseOptions& opt) {
         auto t = parseTypeName(type->get<std::string>());
         if (!t) fail(BuiltinType::Variant, jsonTextForError(j), "unknown Type");
         if (body == nullptr || body->is_null()) return Variant{};
-        Shape shape = body->is_array() && t->first != BuiltinType::ExtensionObject
-                          ? Shape::Array
-                          : Shape::Scalar;
+        Shape shape = body->is_array() && t->first != BuiltinType::ExtensionObject ? Shape::Array
+                                                                                   : Shape::Scalar;
         if (t->second == Shape::Array) shape = Shape::Array;
         if (t->first == BuiltinType::Variant && shape == Shape::Scalar)
             fail(BuiltinType::Variant, jsonTextForError(j), "a Variant cannot hold a Variant");
@@ -611,8 +635,7 @@ Variant inferFromJson(const json& j, const ParseOptions& opt) {
 // ---- value -> JSON -----------------------------------------------------------------------
 json scalarJson(Boolean v) { return v; }
 template <class T>
-    requires(std::is_integral_v<T> && !std::is_same_v<T, Boolean>)
-json scalarJson(T v) {
+requires(std::is_integral_v<T> && !std::is_same_v<T, Boolean>) json scalarJson(T v) {
     if constexpr (std::is_signed_v<T>)
         return static_cast<std::int64_t>(v);
     else
@@ -643,8 +666,8 @@ json scalarJson(const ExtensionObject& v) {
         json o = json::object();
         o["TypeId"] = v.typeId.toString();
         o["Encoding"] = v.encoding == ExtensionObject::Encoding::Xml ? "Xml" : "Binary";
-        o["Body"] = v.encoding == ExtensionObject::Encoding::Xml ? v.body
-                                                                 : ByteString(v.body).toBase64();
+        o["Body"] =
+            v.encoding == ExtensionObject::Encoding::Xml ? v.body : ByteString(v.body).toBase64();
         return o;
     }
 }
@@ -676,7 +699,8 @@ json bodyJson(const Variant& v) {
                 return nullptr;
             } else if constexpr (IsVector<X>::value) {
                 json a = json::array();
-                for (const auto& e : x) a.push_back(scalarJson(static_cast<typename X::value_type>(e)));
+                for (const auto& e : x)
+                    a.push_back(scalarJson(static_cast<typename X::value_type>(e)));
                 return a;
             } else {
                 return scalarJson(x);
@@ -715,8 +739,8 @@ std::string scalarText(const T& v) {
     if constexpr (std::is_same_v<T, Boolean>) {
         return v ? "true" : "false";
     } else if constexpr (std::is_integral_v<T>) {
-        return std::to_string(static_cast<std::conditional_t<std::is_signed_v<T>, long long,
-                                                             unsigned long long>>(v));
+        return std::to_string(
+            static_cast<std::conditional_t<std::is_signed_v<T>, long long, unsigned long long>>(v));
     } else if constexpr (std::is_floating_point_v<T>) {
         return floatText(v);
     } else if constexpr (std::is_same_v<T, String>) {
@@ -917,8 +941,7 @@ std::optional<DateTime> parseDateTime(std::string_view text) {
         }
     }
     if (p != s.size()) return std::nullopt;
-    if (mo < 1 || mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 || sec > 60)
-        return std::nullopt;
+    if (mo < 1 || mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 || sec > 60) return std::nullopt;
     long long days = daysFromCivil(y, static_cast<unsigned>(mo), static_cast<unsigned>(d));
     long long unixSeconds = days * 86400LL + h * 3600LL + mi * 60LL + sec - offsetSeconds;
     return DateTime{DateTime::kUnixEpochTicks + unixSeconds * 10000000LL + frac};

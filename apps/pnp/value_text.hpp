@@ -39,13 +39,12 @@
 #pragma once
 
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <utility>
-
-#include <nlohmann/json.hpp>
 
 #include "ua/types/builtin.hpp"
 
@@ -58,7 +57,7 @@ using Json = nlohmann::ordered_json;
 
 // Text that cannot be converted (a usage error of the command line).
 class ValueError : public std::invalid_argument {
-public:
+  public:
     using std::invalid_argument::invalid_argument;
 };
 

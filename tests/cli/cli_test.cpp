@@ -3,6 +3,7 @@
 // it, and the tests check their output, JSON and exit codes.
 #include <arpa/inet.h>
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <signal.h>
@@ -11,12 +12,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <gtest/gtest.h>
-
+#include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -41,7 +43,7 @@ struct Result {
 // A child process with its stdout / stderr on pipes. The destructor kills it (by PID) if it
 // still runs and reaps it.
 class Child {
-public:
+  public:
     explicit Child(const std::vector<std::string>& args) {
         int outPipe[2], errPipe[2];
         if (pipe2(outPipe, O_CLOEXEC) != 0 || pipe2(errPipe, O_CLOEXEC) != 0) return;
@@ -149,7 +151,7 @@ public:
 
     std::string out, err;
 
-private:
+  private:
     void kill() {
         if (pid_ <= 0) return;
         ::kill(pid_, SIGKILL);
@@ -226,13 +228,13 @@ json parseJson(const Result& r) {
 
 // ---- the server fixture -------------------------------------------------------------------
 class CliTest : public ::testing::Test {
-protected:
+  protected:
     static void SetUpTestSuite() {
         for (int attempt = 0; attempt < 3 && !server_; ++attempt) {
             port_ = freePort();
-            auto c = std::make_unique<Child>(withBinary({"ua", "serve", "--host", "127.0.0.1",
-                                                         "--port", std::to_string(port_),
-                                                         "--user", "operator:secret"}));
+            auto c = std::make_unique<Child>(
+                withBinary({"ua", "serve", "--host", "127.0.0.1", "--port", std::to_string(port_),
+                            "--user", "operator:secret"}));
             auto line = c->waitForLine("listening on", milliseconds(10000));
             if (line) {
                 listeningLine_ = *line;
@@ -362,8 +364,8 @@ TEST_F(CliTest, ReadServerStatusIsDecoded) {
 }
 
 TEST_F(CliTest, ReadOtherAttributes) {
-    Result r = run({"ua", "read", url_, demo("Scalar.Double"), demo("Array.String"),
-                    "--attribute", "DataType", "--json"});
+    Result r = run({"ua", "read", url_, demo("Scalar.Double"), demo("Array.String"), "--attribute",
+                    "DataType", "--json"});
     ASSERT_EQ(r.exitCode, 0) << describe(r);
     json j = parseJson(r);
     EXPECT_EQ(j["results"][0]["value"], "i=11");
@@ -402,7 +404,10 @@ TEST_F(CliTest, WriteAndReadBack) {
         {"Scalar.Guid", "72962b91-fa75-4ae6-8d28-b404dc7daf63", "",
          "72962B91-FA75-4AE6-8D28-B404DC7DAF63", "Guid"},
         {"Scalar.NodeId", "nsu=urn:pnp:demo;s=Demo", "", nullptr, "NodeId"},  // checked below
-        {"Scalar.LocalizedText", "\"hello\"@en-US", "", {{"Locale", "en-US"}, {"Text", "hello"}},
+        {"Scalar.LocalizedText",
+         "\"hello\"@en-US",
+         "",
+         {{"Locale", "en-US"}, {"Text", "hello"}},
          "LocalizedText"},
         {"Scalar.QualifiedName", "1:Qn", "", "1:Qn", "QualifiedName"},
         {"Scalar.StatusCode", "BadOutOfRange", "", "BadOutOfRange", "StatusCode"},
@@ -427,7 +432,9 @@ TEST_F(CliTest, WriteAndReadBack) {
         ASSERT_EQ(r.exitCode, 0) << describe(r);
         json x = parseJson(r)["results"][0];
         EXPECT_EQ(x["type"], c.expectedType) << r.out;
-        if (!c.expected.is_null()) EXPECT_EQ(x["value"], c.expected) << r.out;
+        if (!c.expected.is_null()) {
+            EXPECT_EQ(x["value"], c.expected) << r.out;
+        }
         if (c.node == "Scalar.NodeId") {
             std::string v = x["value"];
             EXPECT_TRUE(v.starts_with("ns=") && v.ends_with(";s=Demo")) << v;

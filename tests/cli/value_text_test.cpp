@@ -79,10 +79,8 @@ TEST(ValueText, IntegersAreRangeChecked) {
     EXPECT_EQ(parse("0x2A", "Int32"), Variant(Int32{42}));
     EXPECT_EQ(parse(" 42 ", "Int32"), Variant(Int32{42}));
     EXPECT_EQ(parse("4294967295", "UInt32"), Variant(UInt32{4294967295u}));
-    EXPECT_EQ(parse("-9223372036854775808", "Int64"),
-              Variant(std::numeric_limits<Int64>::min()));
-    EXPECT_EQ(parse("18446744073709551615", "UInt64"),
-              Variant(std::numeric_limits<UInt64>::max()));
+    EXPECT_EQ(parse("-9223372036854775808", "Int64"), Variant(std::numeric_limits<Int64>::min()));
+    EXPECT_EQ(parse("18446744073709551615", "UInt64"), Variant(std::numeric_limits<UInt64>::max()));
     EXPECT_THROW(parse("18446744073709551616", "UInt64"), ValueError);
     EXPECT_THROW(parse("1.5", "Int32"), ValueError);
     EXPECT_THROW(parse("", "Int32"), ValueError);
@@ -124,7 +122,8 @@ TEST(ValueText, FloatingPoint) {
     EXPECT_THROW(parse("1e39", "Float"), ValueError);
     EXPECT_THROW(parse("abc", "Double"), ValueError);
     EXPECT_TRUE(std::isnan(*parse("NaN", "Double").scalar<Double>()));
-    EXPECT_EQ(*parse("-Infinity", "Float").scalar<Float>(), -std::numeric_limits<Float>::infinity());
+    EXPECT_EQ(*parse("-Infinity", "Float").scalar<Float>(),
+              -std::numeric_limits<Float>::infinity());
     EXPECT_EQ(toText(Variant(Double{3.141592653589793})), "3.141592653589793");
     EXPECT_EQ(toText(Variant(Float{0.1f})), "0.1");
     EXPECT_EQ(toJson(Variant(Float{0.1f})).dump(), "0.1");
@@ -187,7 +186,7 @@ TEST(ValueText, ByteString) {
     EXPECT_EQ(toText(Variant(b)), "0x000102feff");
     EXPECT_EQ(toJson(Variant(b)), json("AAEC/v8="));
     expectJsonRoundTrip(Variant(std::vector<ByteString>{ByteString("abc"), ByteString(),
-                                                         ByteString(std::string("\0", 1))}));
+                                                        ByteString(std::string("\0", 1))}));
 }
 
 TEST(ValueText, NodeIds) {
@@ -204,10 +203,10 @@ TEST(ValueText, NodeIds) {
     ExpandedNodeId x(NodeId(0, 1234), "urn:pnp:other", 0);
     EXPECT_EQ(parse("nsu=urn:pnp:other;i=1234", "ExpandedNodeId"), Variant(x));
     EXPECT_EQ(toText(Variant(x)), "nsu=urn:pnp:other;i=1234");
-    expectJsonRoundTrip(Variant(std::vector<NodeId>{
-        NodeId(0, 2253), NodeId(1, "hello"),
-        NodeId(1, *Guid::parse("72962B91-FA75-4AE6-8D28-B404DC7DAF63")),
-        NodeId(1, ByteString(std::string("\x01\x02\x03"))), NodeId(3, 70000)}));
+    expectJsonRoundTrip(Variant(
+        std::vector<NodeId>{NodeId(0, 2253), NodeId(1, "hello"),
+                            NodeId(1, *Guid::parse("72962B91-FA75-4AE6-8D28-B404DC7DAF63")),
+                            NodeId(1, ByteString(std::string("\x01\x02\x03"))), NodeId(3, 70000)}));
     expectJsonRoundTrip(Variant(std::vector<ExpandedNodeId>{
         ExpandedNodeId(NodeId(0, 85)), ExpandedNodeId(NodeId(1, "x.y"), "", 2), x}));
 }
@@ -238,8 +237,8 @@ TEST(ValueText, QualifiedNameAndLocalizedText) {
     LocalizedText odd("en", "say \"hi\"@home");
     EXPECT_EQ(parse(toText(Variant(odd)), "LocalizedText"), Variant(odd));
     expectJsonRoundTrip(Variant(std::vector<QualifiedName>{{0, "A"}, {1, "B"}}));
-    expectJsonRoundTrip(Variant(
-        std::vector<LocalizedText>{LocalizedText("de", "hallo"), LocalizedText("", "x")}));
+    expectJsonRoundTrip(
+        Variant(std::vector<LocalizedText>{LocalizedText("de", "hallo"), LocalizedText("", "x")}));
 }
 
 TEST(ValueText, ExtensionObjectIsDecodedWhenKnown) {
@@ -325,8 +324,7 @@ TEST(ValueText, DiagnosticInfo) {
     EXPECT_EQ(j["InnerDiagnosticInfo"]["Locale"], 1);
     expectJsonRoundTrip(Variant(d));
     expectJsonRoundTrip(Variant(std::vector<DiagnosticInfo>{DiagnosticInfo{}, d}));
-    EXPECT_EQ(parse("{\"AdditionalInfo\":\"x\"}", "DiagnosticInfo"),
-              Variant([] {
+    EXPECT_EQ(parse("{\"AdditionalInfo\":\"x\"}", "DiagnosticInfo"), Variant([] {
                   DiagnosticInfo x;
                   x.additionalInfo = "x";
                   return x;

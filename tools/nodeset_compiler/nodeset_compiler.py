@@ -10,12 +10,16 @@ Blob format ("PNPNSET" version 1). All integers are LEB128 varints unless stated
 (index 0 is always the empty string).
 
     magic      8 bytes  "PNPNSET1"
+    valuesAt   4 bytes  little-endian offset of the values section from the blob start
     nodeCount  varint
     refCount   varint
     namespaces varint count, then count x (varint length, UTF-8 bytes)   [0] = UA namespace
     strings    varint count, then count x (varint length, UTF-8 bytes)
     nodes      nodeCount x node
     references refCount x (source node index, reference type node index, target node index)
+    values     the encoded Values and DataTypeDefinitions, referenced by (offset, length)
+               from the node records: kept apart so that start-up reads only the compact
+               node and reference sections and the values are touched when first read
 
     node:
       nodeClass  byte   (Part 3 NodeClass value: 1 Object, 2 Variable, 4 Method, ...)
@@ -33,12 +37,13 @@ Blob format ("PNPNSET" version 1). All integers are LEB128 varints unless stated
         Object, View:   byte eventNotifier
         Variable:       cnid dataType, svarint valueRank, byte accessLevel,
                         byte userAccessLevel, [f64 minimumSamplingInterval],
-                        [varint n, n x varint arrayDimensions], [varint len, Variant]
+                        [varint n, n x varint arrayDimensions], [value]
         VariableType:   cnid dataType, svarint valueRank, [arrayDimensions], [value]
         ReferenceType:  [varint locale, varint text]  (inverseName)
-        DataType:       [varint len, ExtensionObject]  (DataTypeDefinition)
-      Values and DataTypeDefinitions use the OPC UA Binary encoding (Part 6 §5.2) of a
-      Variant / ExtensionObject, so the C++ side decodes them with its regular codec.
+        DataType:       [value]  (DataTypeDefinition)
+      value: varint offset into the values section, varint length. Values are the OPC UA
+      Binary encoding (Part 6 §5.2) of a Variant, DataTypeDefinitions that of an
+      ExtensionObject, so the C++ side decodes them with its regular codec.
 
     cnid (compact NodeId): byte kind, then
         0: numeric in namespace 0     varint id
@@ -784,6 +789,13 @@ def compile_nodeset(ns):
     strings = Strings()
     venc = ValueEncoder(ns)
     body = Blob()
+    values = bytearray()
+
+    def add_value(data):
+        body.varint(len(values))
+        body.varint(len(data))
+        values.extend(data)
+
     stats = {"values": 0, "definitions": 0}
     for n in ns.nodes:
         a = n.attrs
@@ -853,7 +865,7 @@ def compile_nodeset(ns):
                 for d in dims:
                     body.varint(d)
             if value is not None:
-                body.bytes_(value)
+                add_value(value)
                 stats["values"] += 1
         elif n.cls == 32:
             if flags & 0x0200:
@@ -861,7 +873,7 @@ def compile_nodeset(ns):
                 body.varint(strings(n.inverse_name[1]))
         elif n.cls == 64:
             if definition is not None:
-                body.bytes_(definition)
+                add_value(definition)
                 stats["definitions"] += 1
     refs = Blob()
     count = 0
@@ -879,6 +891,7 @@ def compile_nodeset(ns):
         count += 1
     head = Blob()
     head.b += b"PNPNSET1"
+    head.b += b"\0\0\0\0"  # valuesAt, patched below
     head.varint(len(ns.nodes))
     head.varint(count)
     head.varint(len(ns.namespace_uris))
@@ -890,7 +903,9 @@ def compile_nodeset(ns):
     stats["nodes"] = len(ns.nodes)
     stats["references"] = count
     stats["strings"] = len(strings.items)
-    return bytes(head.b + body.b + refs.b), stats
+    values_at = len(head.b) + len(body.b) + len(refs.b)
+    head.b[8:12] = struct.pack("<I", values_at)
+    return bytes(head.b + body.b + refs.b + values), stats
 
 
 def cpp_literal(data, width=96):

@@ -134,6 +134,7 @@ public:
     bool sessionActive = false;
     bool sessionInvalid = false;  // the server said it forgot the session
     UInt32 requestHandle = 0;
+    RequestHeader header{};
     std::unordered_map<UInt32, Pending> pending;
     Clock::time_point nextAsyncDeadline = Clock::time_point::max();
     Clock::time_point lastReceive{};
@@ -158,13 +159,17 @@ public:
         return t;
     }
 
-    RequestHeader makeHeader(Clock::time_point now, Clock::time_point deadline) {
-        RequestHeader h{};
-        if (session) h.authenticationToken = session->authenticationToken;
-        h.timestamp = DateTime::now();
-        h.requestHandle = ++requestHandle;
-        h.timeoutHint = timeoutHint(now, deadline);
-        return h;
+    // The RequestHeader of the next request. It lives here (with the session's
+    // authentication token) and is swapped into the request only while it is encoded.
+    RequestHeader& makeHeader(Clock::time_point now, Clock::time_point deadline) {
+        header.timestamp = DateTime::now();
+        header.requestHandle = ++requestHandle;
+        header.timeoutHint = timeoutHint(now, deadline);
+        return header;
+    }
+    void setSession(std::optional<Session> s) {
+        session = std::move(s);
+        header.authenticationToken = session ? session->authenticationToken : NodeId();
     }
 
     void wake() const {
@@ -318,7 +323,7 @@ public:
         req.clientNonce = randomNonce();
         req.requestedSessionTimeout = static_cast<Double>(config.requestedSessionTimeout.count());
         req.maxResponseMessageSize = config.transport.maxMessageSize;
-        session.reset();
+        setSession(std::nullopt);
         sessionActive = false;
         CreateSessionResponse resp = sessionCall(req, deadline, done);
 
@@ -328,7 +333,7 @@ public:
         s.revisedTimeout = resp.revisedSessionTimeout;
         s.serverNonce = std::move(resp.serverNonce);
         choosePolicies(resp.serverEndpoints, s);
-        session = std::move(s);
+        setSession(std::move(s));
         sessionInvalid = false;
         namespaces.clear();  // possibly another server (instance)
         ++stats.sessionsCreated;
@@ -450,10 +455,19 @@ public:
         }
     }
 
+    // A request whose deadline passed before it was sent is not sent at all.
+    void checkDeadline(Clock::time_point deadline, std::string_view service) {
+        if (Clock::now() >= deadline) {
+            ++stats.timeouts;
+            throw Error(status::BadTimeout, std::string(service) + ": deadline passed before sending");
+        }
+    }
+
     IncomingResponse roundTrip(Client::EncodeRef encode, bool idempotent,
                                Clock::time_point deadline, std::string_view service,
                                Completions& done) {
         for (int attempt = 0;; ++attempt) {
+            checkDeadline(deadline, service);
             ensureReady(deadline, service, done);
             bool sent = false;
             try {
@@ -483,6 +497,7 @@ public:
     void sendAsync(Client::EncodeRef encode, Clock::time_point deadline, std::string_view service,
                    RawCallback& callback, Completions& done) {
         for (int attempt = 0;; ++attempt) {
+            checkDeadline(deadline, service);
             ensureReady(deadline, service, done);
             try {
                 Clock::time_point now = Clock::now();
@@ -640,7 +655,7 @@ public:
             }
         }
         dropConnection();
-        session.reset();
+        setSession(std::nullopt);
         sessionActive = false;
         sessionInvalid = false;
         namespaces.clear();
@@ -688,7 +703,7 @@ void Client::connect(std::string_view endpointUrl, Identity identity, Deadline d
         s.activateSession(dl, done);
     } catch (...) {
         s.dropConnection();
-        s.session.reset();
+        s.setSession(std::nullopt);
         throw;
     }
     s.wantConnected = true;
@@ -785,7 +800,7 @@ IncomingResponse Client::discoveryRoundTrip(std::string_view url, EncodeRef enco
         h.timestamp = DateTime::now();
         h.requestHandle = 1;
         h.timeoutHint = timeoutHint(now, dl);
-        encode(buffer, std::move(h));
+        encode(buffer, h);
         UInt32 id = c->send(std::move(buffer), dl);
         for (;;) {
             auto m = c->receive(dl);

@@ -253,18 +253,28 @@ public:
     class Impl;
 
 private:
-    // Calls encode(buffer, header): the request's header must be set from `header` and the
-    // request appended to `buffer` (encoding NodeId + body).
+    // Appends the request (encoding NodeId + body) to `buffer`, with `header` as its
+    // RequestHeader. The header is swapped in and out of the request around the encoding,
+    // so neither is copied (no allocation for the authentication token).
     struct EncodeRef {
         void* object;
-        void (*function)(void*, Buffer&, RequestHeader&&);
-        void operator()(Buffer& b, RequestHeader&& h) const { function(object, b, std::move(h)); }
+        void (*function)(void*, Buffer&, RequestHeader&);
+        void operator()(Buffer& b, RequestHeader& h) const { function(object, b, h); }
     };
     template <class Req>
     static EncodeRef encoderFor(Req& req) {
-        return {&req, [](void* p, Buffer& b, RequestHeader&& h) {
+        return {&req, [](void* p, Buffer& b, RequestHeader& h) {
                     auto& r = *static_cast<Req*>(p);
-                    r.requestHeader = std::move(h);
+                    using std::swap;
+                    swap(r.requestHeader, h);
+                    struct Restore {
+                        Req& r;
+                        RequestHeader& h;
+                        ~Restore() {
+                            using std::swap;
+                            swap(r.requestHeader, h);
+                        }
+                    } restore{r, h};
                     detail::encodeRequest(b, r);
                 }};
     }

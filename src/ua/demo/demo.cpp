@@ -23,7 +23,7 @@ using Clock = std::chrono::steady_clock;
 // One thread and a timer queue: every pending Sleep call waits here, none on the network
 // thread. Completions run on the worker thread, without the lock held.
 class SleepWorker {
-public:
+  public:
     explicit SleepWorker(std::size_t maxPending) : maxPending_(maxPending) {}
     ~SleepWorker() { shutdown(); }
     SleepWorker(const SleepWorker&) = delete;
@@ -69,7 +69,7 @@ public:
         return queue_.size();
     }
 
-private:
+  private:
     struct Entry {
         Clock::time_point due;
         MethodCompletion done;
@@ -110,14 +110,14 @@ private:
 namespace {
 
 constexpr std::array<BuiltinType, 25> kTypes = {
-    BuiltinType::Boolean,       BuiltinType::SByte,          BuiltinType::Byte,
-    BuiltinType::Int16,         BuiltinType::UInt16,         BuiltinType::Int32,
-    BuiltinType::UInt32,        BuiltinType::Int64,          BuiltinType::UInt64,
-    BuiltinType::Float,         BuiltinType::Double,         BuiltinType::String,
-    BuiltinType::DateTime,      BuiltinType::Guid,           BuiltinType::ByteString,
-    BuiltinType::XmlElement,    BuiltinType::NodeId,         BuiltinType::ExpandedNodeId,
-    BuiltinType::StatusCode,    BuiltinType::QualifiedName,  BuiltinType::LocalizedText,
-    BuiltinType::ExtensionObject, BuiltinType::DataValue,    BuiltinType::Variant,
+    BuiltinType::Boolean,         BuiltinType::SByte,         BuiltinType::Byte,
+    BuiltinType::Int16,           BuiltinType::UInt16,        BuiltinType::Int32,
+    BuiltinType::UInt32,          BuiltinType::Int64,         BuiltinType::UInt64,
+    BuiltinType::Float,           BuiltinType::Double,        BuiltinType::String,
+    BuiltinType::DateTime,        BuiltinType::Guid,          BuiltinType::ByteString,
+    BuiltinType::XmlElement,      BuiltinType::NodeId,        BuiltinType::ExpandedNodeId,
+    BuiltinType::StatusCode,      BuiltinType::QualifiedName, BuiltinType::LocalizedText,
+    BuiltinType::ExtensionObject, BuiltinType::DataValue,     BuiltinType::Variant,
     BuiltinType::DiagnosticInfo,
 };
 
@@ -125,32 +125,58 @@ constexpr std::array<BuiltinType, 25> kTypes = {
 template <class F>
 decltype(auto) withType(BuiltinType t, F&& f) {
     switch (t) {
-        case BuiltinType::Boolean: return f(Boolean{});
-        case BuiltinType::SByte: return f(SByte{});
-        case BuiltinType::Byte: return f(Byte{});
-        case BuiltinType::Int16: return f(Int16{});
-        case BuiltinType::UInt16: return f(UInt16{});
-        case BuiltinType::Int32: return f(Int32{});
-        case BuiltinType::UInt32: return f(UInt32{});
-        case BuiltinType::Int64: return f(Int64{});
-        case BuiltinType::UInt64: return f(UInt64{});
-        case BuiltinType::Float: return f(Float{});
-        case BuiltinType::Double: return f(Double{});
-        case BuiltinType::String: return f(String{});
-        case BuiltinType::DateTime: return f(DateTime{});
-        case BuiltinType::Guid: return f(Guid{});
-        case BuiltinType::ByteString: return f(ByteString{});
-        case BuiltinType::XmlElement: return f(XmlElement{});
-        case BuiltinType::NodeId: return f(NodeId{});
-        case BuiltinType::ExpandedNodeId: return f(ExpandedNodeId{});
-        case BuiltinType::StatusCode: return f(StatusCode{});
-        case BuiltinType::QualifiedName: return f(QualifiedName{});
-        case BuiltinType::LocalizedText: return f(LocalizedText{});
-        case BuiltinType::ExtensionObject: return f(ExtensionObject{});
-        case BuiltinType::DataValue: return f(DataValue{});
-        case BuiltinType::Variant: return f(Variant{});
-        case BuiltinType::DiagnosticInfo: return f(DiagnosticInfo{});
-        case BuiltinType::Null: break;
+        case BuiltinType::Boolean:
+            return f(Boolean{});
+        case BuiltinType::SByte:
+            return f(SByte{});
+        case BuiltinType::Byte:
+            return f(Byte{});
+        case BuiltinType::Int16:
+            return f(Int16{});
+        case BuiltinType::UInt16:
+            return f(UInt16{});
+        case BuiltinType::Int32:
+            return f(Int32{});
+        case BuiltinType::UInt32:
+            return f(UInt32{});
+        case BuiltinType::Int64:
+            return f(Int64{});
+        case BuiltinType::UInt64:
+            return f(UInt64{});
+        case BuiltinType::Float:
+            return f(Float{});
+        case BuiltinType::Double:
+            return f(Double{});
+        case BuiltinType::String:
+            return f(String{});
+        case BuiltinType::DateTime:
+            return f(DateTime{});
+        case BuiltinType::Guid:
+            return f(Guid{});
+        case BuiltinType::ByteString:
+            return f(ByteString{});
+        case BuiltinType::XmlElement:
+            return f(XmlElement{});
+        case BuiltinType::NodeId:
+            return f(NodeId{});
+        case BuiltinType::ExpandedNodeId:
+            return f(ExpandedNodeId{});
+        case BuiltinType::StatusCode:
+            return f(StatusCode{});
+        case BuiltinType::QualifiedName:
+            return f(QualifiedName{});
+        case BuiltinType::LocalizedText:
+            return f(LocalizedText{});
+        case BuiltinType::ExtensionObject:
+            return f(ExtensionObject{});
+        case BuiltinType::DataValue:
+            return f(DataValue{});
+        case BuiltinType::Variant:
+            return f(Variant{});
+        case BuiltinType::DiagnosticInfo:
+            return f(DiagnosticInfo{});
+        case BuiltinType::Null:
+            break;
     }
     throw server::AddressSpaceError(status::BadInvalidArgument, "no demo variable of type Null");
 }
@@ -168,9 +194,9 @@ void addNodes(AddressSpace& as, UInt16 ns, std::shared_ptr<SleepWorker> worker,
               const DemoOptions& options) {
     server::ObjectAttributes objAttr;
     objAttr.description = LocalizedText("en", "pnp demo: every built-in type, Echo, Add, Sleep");
-    const NodeId demo = as.addObject(NodeId(0, ns0::ObjectsFolder), NodeId(ns, "Demo"),
-                                     QualifiedName{ns, "Demo"}, objAttr,
-                                     NodeId(0, ns0::BaseObjectType), NodeId(0, ns0::Organizes));
+    const NodeId demo =
+        as.addObject(NodeId(0, ns0::ObjectsFolder), NodeId(ns, "Demo"), QualifiedName{ns, "Demo"},
+                     objAttr, NodeId(0, ns0::BaseObjectType), NodeId(0, ns0::Organizes));
 
     const Byte rw = server::access_level::CurrentRead | server::access_level::CurrentWrite;
     for (BuiltinType t : kTypes) {
@@ -224,8 +250,8 @@ void addNodes(AddressSpace& as, UInt16 ns, std::shared_ptr<SleepWorker> worker,
                  }),
                  m);
 
-    m.description = LocalizedText(
-        "en", "waits, off the network thread, then completes (asynchronous method)");
+    m.description =
+        LocalizedText("en", "waits, off the network thread, then completes (asynchronous method)");
     const auto maxSleep = options.maxSleep;
     as.addMethod(
         demo, NodeId(ns, "Demo.Sleep"), QualifiedName{ns, "Sleep"},
@@ -233,8 +259,9 @@ void addNodes(AddressSpace& as, UInt16 ns, std::shared_ptr<SleepWorker> worker,
         [worker = std::move(worker), maxSleep](const server::MethodCallContext&,
                                                std::vector<Variant> in, MethodCompletion done) {
             const UInt32* ms = in.size() == 1 ? in[0].scalar<UInt32>() : nullptr;
-            if (ms == nullptr) return done.fail(in.empty() ? status::BadArgumentsMissing
-                                                           : status::BadTypeMismatch);
+            if (ms == nullptr)
+                return done.fail(in.empty() ? status::BadArgumentsMissing
+                                            : status::BadTypeMismatch);
             const std::chrono::milliseconds d(*ms);
             if (d > maxSleep) return done.fail(status::BadOutOfRange);
             StatusCode st = worker->schedule(Clock::now() + d, done);
@@ -256,17 +283,23 @@ std::span<const BuiltinType> demoTypes() { return kTypes; }
 
 NodeId demoDataType(BuiltinType t) {
     switch (t) {
-        case BuiltinType::ExtensionObject: return NodeId(0, ns0::Structure);
-        case BuiltinType::Variant: return NodeId(0, ns0::BaseDataType);
-        default: return NodeId(0, static_cast<UInt32>(t));
+        case BuiltinType::ExtensionObject:
+            return NodeId(0, ns0::Structure);
+        case BuiltinType::Variant:
+            return NodeId(0, ns0::BaseDataType);
+        default:
+            return NodeId(0, static_cast<UInt32>(t));
     }
 }
 
 Variant demoInitialScalar(BuiltinType t) {
     switch (t) {
-        case BuiltinType::ExtensionObject: return toExtensionObject(Range{});  // Range{0, 0}
-        case BuiltinType::Variant: return Int32{0};  // a scalar Variant holds a concrete type
-        default: return withType(t, [](auto v) { return Variant(std::move(v)); });
+        case BuiltinType::ExtensionObject:
+            return toExtensionObject(Range{});  // Range{0, 0}
+        case BuiltinType::Variant:
+            return Int32{0};  // a scalar Variant holds a concrete type
+        default:
+            return withType(t, [](auto v) { return Variant(std::move(v)); });
     }
 }
 

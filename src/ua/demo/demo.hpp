@@ -60,7 +60,7 @@ class SleepWorker;
 // Builds the demo namespace in a server's address space and owns the Sleep worker.
 // Throws server::AddressSpaceError when the demo nodes exist already.
 class DemoNamespace {
-public:
+  public:
     explicit DemoNamespace(server::Server& server, DemoOptions options = {});
     explicit DemoNamespace(server::AddressSpace& addressSpace, DemoOptions options = {});
     // Completes pending Sleep calls with BadShutdown and joins the worker. Later Sleep calls
@@ -74,7 +74,7 @@ public:
     // Sleep calls currently waiting.
     std::size_t pendingSleeps() const;
 
-private:
+  private:
     UInt16 ns_ = 0;
     std::shared_ptr<SleepWorker> worker_;
 };

@@ -19,7 +19,7 @@ struct SessionIdentity {
 };
 
 class AccessControl {
-public:
+  public:
     virtual ~AccessControl() = default;
     // The token policies advertised in every EndpointDescription.
     virtual std::vector<UserTokenPolicy> userTokenPolicies() const = 0;
@@ -33,14 +33,14 @@ public:
 
 // Anonymous access (optional) plus a fixed table of user names and passwords.
 class DefaultAccessControl : public AccessControl {
-public:
+  public:
     explicit DefaultAccessControl(bool allowAnonymous = true,
                                   std::map<std::string, std::string> users = {});
     std::vector<UserTokenPolicy> userTokenPolicies() const override;
     StatusCode activateSession(const ExtensionObject& userIdentityToken,
                                SessionIdentity& identity) override;
 
-private:
+  private:
     bool allowAnonymous_;
     std::map<std::string, std::string> users_;
 };

@@ -149,8 +149,7 @@ NodeIndex AddressSpace::Impl::childByName(NodeIndex parent, const QualifiedName&
 
 // ---- Impl: nodes ----------------------------------------------------------------------------
 NodeIndex AddressSpace::Impl::createNode(const NodeId& requested, NodeClassBits cls,
-                                         const QualifiedName& browseName,
-                                         const NodeAttributes& a) {
+                                         const QualifiedName& browseName, const NodeAttributes& a) {
     if (browseName.name.empty())
         throw AddressSpaceError(status::BadBrowseNameInvalid, "empty BrowseName");
     if (browseName.namespaceIndex >= namespaces.size())
@@ -198,7 +197,8 @@ void AddressSpace::Impl::deleteNode(NodeIndex i, bool children) {
     bool wasRefType = n.nodeClass == NodeClassBits::ReferenceType;
     for (const Ref& r : n.refs) {
         if (!r.isExternal() && r.target != i)
-            nodes[r.target].refs.erase(Ref{i, r.type, static_cast<std::uint16_t>(r.flags ^ Ref::kInverse)});
+            nodes[r.target].refs.erase(
+                Ref{i, r.type, static_cast<std::uint16_t>(r.flags ^ Ref::kInverse)});
         // A reference to itself is listed twice (both ends) but counted once.
         if (r.isExternal() || r.target != i || r.isForward()) --referenceCount;
     }
@@ -221,10 +221,109 @@ void AddressSpace::Impl::deleteNode(NodeIndex i, bool children) {
     }
     m.extra.reset();
     methods.erase(i);
+    methodDeclarations.erase(i);
     unregisterId(i);
     m.flags = 0;
     --liveNodes;
     if (wasRefType) rebuildSubtypeClosure();
+}
+
+// ---- Impl: instantiation of type definitions ----------------------------------------------------
+namespace {
+constexpr int kMaxInstantiationDepth = 16;
+}
+
+void AddressSpace::Impl::instantiate(NodeIndex instance, NodeIndex type, int depth) {
+    for (int d = 0; type != kNoNode && d < 64; ++d) {
+        copyDeclaredChildren(instance, type, depth);
+        type = supertypeOf(type);
+    }
+}
+
+void AddressSpace::Impl::copyDeclaredChildren(NodeIndex instance, NodeIndex declaration,
+                                              int depth) {
+    if (depth >= kMaxInstantiationDepth || rtAggregates == kNoRefType) return;
+    const NodeIndex mandatory = find(ns0::ModellingRule_Mandatory);
+    struct Child {
+        std::uint16_t type;
+        NodeIndex node;
+    };
+    // A method's argument properties always go with it.
+    const bool isMethod = nodes[declaration].nodeClass == NodeClassBits::Method;
+    auto isArguments = [&](NodeIndex c) {
+        std::string_view n = strings.get(nodes[c].browseName);
+        return nodes[c].browseNs == 0 && (n == "InputArguments" || n == "OutputArguments");
+    };
+    std::vector<Child> children;  // copied first: linking below appends to reference lists
+    for (const Ref& r : nodes[declaration].refs) {
+        if (!r.isForward() || r.isExternal() || !refTypeMatches(r.type, rtAggregates, true))
+            continue;
+        if ((mandatory != kNoNode && forwardTarget(r.target, rtHasModellingRule) == mandatory) ||
+            (isMethod && r.type == rtHasProperty && isArguments(r.target)))
+            children.push_back({r.type, r.target});
+    }
+    for (const Child& c : children) {
+        const Node& decl = nodes[c.node];
+        QualifiedName name{decl.browseNs, String(strings.get(decl.browseName))};
+        if (childByName(instance, name) != kNoNode) continue;  // overridden by a subtype
+        copyDeclaration(instance, c.type, c.node, depth + 1);
+    }
+}
+
+NodeIndex AddressSpace::Impl::copyDeclaration(NodeIndex parent, std::uint16_t refType,
+                                              NodeIndex declaration, int depth) {
+    const Node& d = nodes[declaration];
+    const NodeClassBits cls = d.nodeClass;
+    if (cls != NodeClassBits::Object && cls != NodeClassBits::Variable &&
+        cls != NodeClassBits::Method)
+        return kNoNode;
+    const NodeId parentId = idOf(parent);
+    NodeId id(parentId.namespaceIndex() == 0 ? UInt16{1} : parentId.namespaceIndex(), UInt32{0});
+    if (parentId.idType() == IdType::String) {
+        NodeId named(parentId.namespaceIndex(),
+                     parentId.string() + "." + std::string(strings.get(d.browseName)));
+        if (find(named) == kNoNode) id = named;
+    }
+    if (id.isNumeric()) id = freshId(id.namespaceIndex());
+    const auto index = static_cast<NodeIndex>(nodes.size());
+    {
+        Node& n = nodes.emplace_back();
+        const Node& src = nodes[declaration];  // re-read: emplace_back may reallocate
+        n.nodeClass = cls;
+        n.flags = static_cast<std::uint8_t>(src.flags | Node::kAlive);
+        n.browseNs = src.browseNs;
+        n.browseName = src.browseName;
+        n.displayLocale = src.displayLocale;
+        n.displayText = src.displayText;
+        n.descriptionLocale = src.descriptionLocale;
+        n.descriptionText = src.descriptionText;
+        n.writeMask = src.writeMask;
+        n.userWriteMask = src.userWriteMask;
+        n.eventNotifier = src.eventNotifier;
+        if (src.extra && cls == NodeClassBits::Variable) {
+            auto x = std::make_unique<NodeExtra>();
+            x->arrayDimensions = src.extra->arrayDimensions;
+            x->minimumSamplingInterval = src.extra->minimumSamplingInterval;
+            x->dataType = src.extra->dataType;
+            x->valueRank = src.extra->valueRank;
+            x->accessLevel = src.extra->accessLevel;
+            x->userAccessLevel = src.extra->userAccessLevel;
+            x->value.encoded = src.extra->value.encoded;
+            x->value.encodedSize = src.extra->value.encodedSize;
+            if (src.extra->value.owned)
+                x->value.owned = std::make_unique<DataValue>(*src.extra->value.owned);
+            n.extra = std::move(x);
+        }
+    }
+    registerId(index, id);
+    ++liveNodes;
+    if (cls == NodeClassBits::Method) methodDeclarations[index] = declaration;
+    link(parent, refType, index);
+    NodeIndex td = typeDefinitionOf(declaration);
+    if (td != kNoNode) link(index, rtHasTypeDefinition, td);
+    copyDeclaredChildren(index, declaration, depth);  // the declaration's own children first
+    if (td != kNoNode) instantiate(index, td, depth);
+    return index;
 }
 
 std::size_t AddressSpace::Impl::bytesUsed() const {
@@ -278,11 +377,10 @@ AddressSpace::AddressSpace() : AddressSpace(Options{}) {}
 AddressSpace::AddressSpace(Options options) : impl_(std::make_unique<Impl>(std::move(options))) {
     // Namespace array served live.
     if (impl_->find(ns0::Server_NamespaceArray) != kNoNode) {
-        setValueCallback(NodeId(0, ns0::Server_NamespaceArray),
-                         ValueCallbacks{[this](const NodeId&) {
-                                            return DataValue{Variant{namespaceArray()}};
-                                        },
-                                        {}});
+        setValueCallback(
+            NodeId(0, ns0::Server_NamespaceArray),
+            ValueCallbacks{[this](const NodeId&) { return DataValue{Variant{namespaceArray()}}; },
+                           {}});
     }
 }
 AddressSpace::~AddressSpace() = default;
@@ -333,8 +431,7 @@ UInt16 AddressSpace::addNamespace(std::string_view uri) {
     auto& ns = impl_->namespaces;
     for (std::size_t i = 0; i < ns.size(); ++i)
         if (ns[i] == uri) return static_cast<UInt16>(i);
-    if (ns.size() >= 0xFFFF)
-        throw AddressSpaceError(status::BadOutOfRange, "too many namespaces");
+    if (ns.size() >= 0xFFFF) throw AddressSpaceError(status::BadOutOfRange, "too many namespaces");
     ns.emplace_back(uri);
     return static_cast<UInt16>(ns.size() - 1);
 }
@@ -372,7 +469,8 @@ NodeIndex needClass(const AddressSpace::Impl& s, const NodeId& id, NodeClassBits
 std::uint16_t needRefType(const AddressSpace::Impl& s, const NodeId& id) {
     std::uint16_t t = s.refTypeIndexOf(s.find(id));
     if (t == kNoRefType)
-        throw AddressSpaceError(status::BadReferenceTypeIdInvalid, "reference type " + id.toString());
+        throw AddressSpaceError(status::BadReferenceTypeIdInvalid,
+                                "reference type " + id.toString());
     return t;
 }
 
@@ -415,6 +513,7 @@ NodeId AddressSpace::addObject(const NodeId& parent, const NodeId& id,
     s.nodes[i].eventNotifier = attributes.eventNotifier;
     s.link(p, rt, i);
     s.link(i, s.rtHasTypeDefinition, td);
+    if (attributes.instantiateMandatory) s.instantiate(i, td);
     return s.idOf(i);
 }
 
@@ -433,8 +532,8 @@ NodeId AddressSpace::addVariable(const NodeId& parent, const NodeId& id,
     NodeIndex p = need(s, parent, status::BadParentNodeIdInvalid, "parent");
     NodeIndex td = needClass(s, typeDefinition, NodeClassBits::VariableType,
                              status::BadTypeDefinitionInvalid, "type definition");
-    NodeIndex dt = needClass(s, a.dataType, NodeClassBits::DataType, status::BadTypeMismatch,
-                             "data type");
+    NodeIndex dt =
+        needClass(s, a.dataType, NodeClassBits::DataType, status::BadTypeMismatch, "data type");
     std::uint16_t rt = refTypeFor(s, referenceType, p);
     if (a.value.value && !a.value.value->isEmpty()) {
         StatusCode c = s.checkValue(*a.value.value, dt, a.valueRank, a.arrayDimensions, true);
@@ -444,7 +543,7 @@ NodeId AddressSpace::addVariable(const NodeId& parent, const NodeId& id,
     Node& n = s.nodes[i];
     n.set(Node::kHistorizing, a.historizing);
     auto x = std::make_unique<NodeExtra>();
-    x->dataType = a.dataType;
+    x->dataType = s.compact(a.dataType);
     x->valueRank = a.valueRank;
     x->arrayDimensions = a.arrayDimensions;
     x->accessLevel = a.accessLevel;
@@ -454,6 +553,7 @@ NodeId AddressSpace::addVariable(const NodeId& parent, const NodeId& id,
     n.extra = std::move(x);
     s.link(p, rt, i);
     s.link(i, s.rtHasTypeDefinition, td);
+    if (a.instantiateMandatory) s.instantiate(i, td);
     return s.idOf(i);
 }
 
@@ -498,8 +598,8 @@ NodeId AddressSpace::addMethod(const NodeId& parent, const NodeId& id,
         va.arrayDimensions = {static_cast<UInt32>(args.size())};
         va.value = DataValue(Variant(std::move(objs)));
         NodeId propId(methodId.namespaceIndex(), UInt32{0});
-        if (methodId.idType() == IdType::String && !contains(NodeId(methodId.namespaceIndex(),
-                                                                    methodId.string() + "." + name)))
+        if (methodId.idType() == IdType::String &&
+            !contains(NodeId(methodId.namespaceIndex(), methodId.string() + "." + name)))
             propId = NodeId(methodId.namespaceIndex(), methodId.string() + "." + name);
         addProperty(methodId, propId, QualifiedName{0, name}, va);
     };
@@ -509,8 +609,7 @@ NodeId AddressSpace::addMethod(const NodeId& parent, const NodeId& id,
 }
 
 NodeId AddressSpace::addObjectType(const NodeId& parentType, const NodeId& id,
-                                   const QualifiedName& browseName,
-                                   const ObjectTypeAttributes& a) {
+                                   const QualifiedName& browseName, const ObjectTypeAttributes& a) {
     std::unique_lock lock(impl_->mutex);
     Impl& s = *impl_;
     NodeIndex p = needClass(s, parentType, NodeClassBits::ObjectType,
@@ -528,8 +627,8 @@ NodeId AddressSpace::addVariableType(const NodeId& parentType, const NodeId& id,
     Impl& s = *impl_;
     NodeIndex p = needClass(s, parentType, NodeClassBits::VariableType,
                             status::BadParentNodeIdInvalid, "parent type");
-    NodeIndex dt = needClass(s, a.dataType, NodeClassBits::DataType, status::BadTypeMismatch,
-                             "data type");
+    NodeIndex dt =
+        needClass(s, a.dataType, NodeClassBits::DataType, status::BadTypeMismatch, "data type");
     if (a.value && !a.value->isEmpty()) {
         StatusCode c = s.checkValue(*a.value, dt, a.valueRank, a.arrayDimensions, true);
         if (c.isBad()) throw AddressSpaceError(c, "value of " + browseName.toString());
@@ -537,7 +636,7 @@ NodeId AddressSpace::addVariableType(const NodeId& parentType, const NodeId& id,
     NodeIndex i = s.createNode(id, NodeClassBits::VariableType, browseName, a);
     s.nodes[i].set(Node::kIsAbstract, a.isAbstract);
     auto x = std::make_unique<NodeExtra>();
-    x->dataType = a.dataType;
+    x->dataType = s.compact(a.dataType);
     x->valueRank = a.valueRank;
     x->arrayDimensions = a.arrayDimensions;
     if (a.value) x->value.owned = std::make_unique<DataValue>(*a.value);
@@ -571,8 +670,8 @@ NodeId AddressSpace::addDataType(const NodeId& parentType, const NodeId& id,
                                  const QualifiedName& browseName, const DataTypeAttributes& a) {
     std::unique_lock lock(impl_->mutex);
     Impl& s = *impl_;
-    NodeIndex p = needClass(s, parentType, NodeClassBits::DataType,
-                            status::BadParentNodeIdInvalid, "parent type");
+    NodeIndex p = needClass(s, parentType, NodeClassBits::DataType, status::BadParentNodeIdInvalid,
+                            "parent type");
     NodeIndex i = s.createNode(id, NodeClassBits::DataType, browseName, a);
     s.nodes[i].set(Node::kIsAbstract, a.isAbstract);
     if (!a.definition.empty()) {

@@ -50,12 +50,12 @@ namespace pnp::ua::server {
 
 // Thrown by the application API (never by the services, which report StatusCodes).
 class AddressSpaceError : public std::runtime_error {
-public:
+  public:
     AddressSpaceError(StatusCode s, const std::string& what)
         : std::runtime_error(what + ": " + s.toString()), status_(s) {}
     StatusCode status() const { return status_; }
 
-private:
+  private:
     StatusCode status_;
 };
 
@@ -83,7 +83,7 @@ struct MethodCallContext {
 // ignored). If every copy is destroyed without being invoked, the call completes with
 // Bad_InternalError so that a forgotten completion never hangs a client request.
 class MethodCompletion {
-public:
+  public:
     MethodCompletion() = default;
     void operator()(StatusCode status, std::vector<Variant> outputs = {}) const;
     void succeed(std::vector<Variant> outputs) const { (*this)(StatusCode{}, std::move(outputs)); }
@@ -92,7 +92,7 @@ public:
 
     struct Slot;  // implementation detail
 
-private:
+  private:
     friend class AddressSpace;
     explicit MethodCompletion(std::shared_ptr<Slot> s) : slot_(std::move(s)) {}
     std::shared_ptr<Slot> slot_;
@@ -104,9 +104,9 @@ private:
 using MethodHandler = std::function<void(const MethodCallContext& context,
                                          std::vector<Variant> inputs, MethodCompletion done)>;
 // The synchronous convenience form: runs on the calling (network) thread, so it must be quick.
-using SyncMethodHandler = std::function<StatusCode(const MethodCallContext& context,
-                                                   const std::vector<Variant>& inputs,
-                                                   std::vector<Variant>& outputs)>;
+using SyncMethodHandler =
+    std::function<StatusCode(const MethodCallContext& context, const std::vector<Variant>& inputs,
+                             std::vector<Variant>& outputs)>;
 MethodHandler makeMethodHandler(SyncMethodHandler handler);
 
 // ---- browse continuation points ----------------------------------------------------------
@@ -114,13 +114,13 @@ MethodHandler makeMethodHandler(SyncMethodHandler handler);
 // passes it to browse() / browseNext(); it is not thread-safe (one session's requests are
 // processed one after the other).
 class ContinuationPointStore {
-public:
+  public:
     explicit ContinuationPointStore(std::size_t maxPoints = 16);
     std::size_t size() const { return points_.size(); }
     std::size_t capacity() const { return max_; }
     void clear() { points_.clear(); }
 
-private:
+  private:
     friend class AddressSpace;
     struct Point {
         ByteString id;
@@ -147,6 +147,9 @@ struct NodeAttributes {
 
 struct ObjectAttributes : NodeAttributes {
     Byte eventNotifier = 0;
+    // Create the Mandatory InstanceDeclarations of the type definition (and its supertypes)
+    // below the new object, recursively (OPC 10000-3 §6.4.4).
+    bool instantiateMandatory = true;
 };
 
 struct VariableAttributes : NodeAttributes {
@@ -157,6 +160,7 @@ struct VariableAttributes : NodeAttributes {
     Byte accessLevel = access_level::CurrentRead;
     double minimumSamplingInterval = 0;
     bool historizing = false;
+    bool instantiateMandatory = true;  // as for objects
 };
 
 struct MethodAttributes : NodeAttributes {
@@ -195,7 +199,7 @@ struct ViewAttributes : NodeAttributes {
 
 // ---- the address space ---------------------------------------------------------------
 class AddressSpace {
-public:
+  public:
     struct Options {
         // Namespace 1 (OPC 10000-3 §8.2.2: the server's local namespace).
         std::string applicationUri = "urn:pnp:server";
@@ -235,6 +239,10 @@ public:
     // `id` null (ns=N;i=0) asks for a fresh numeric id in namespace N (N=0 means 1).
     // `referenceType` null picks Organizes below a folder (FolderType or subtype, or a View)
     // and HasComponent otherwise. Each returns the new node's id.
+    // Objects and variables get copies of the Mandatory children their type definition
+    // declares (ids "<parent id>.<BrowseName>" below string ids, fresh numeric ids
+    // otherwise); a copied method shares the handler of its declaration unless the
+    // application sets one on the copy.
     NodeId addObject(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
                      const ObjectAttributes& attributes = {},
                      const NodeId& typeDefinition = NodeId(0, ns0::BaseObjectType),
@@ -263,8 +271,8 @@ public:
     NodeId addReferenceType(const NodeId& parentType, const NodeId& id,
                             const QualifiedName& browseName,
                             const ReferenceTypeAttributes& attributes = {});
-    NodeId addDataType(const NodeId& parentType, const NodeId& id,
-                       const QualifiedName& browseName, const DataTypeAttributes& attributes = {});
+    NodeId addDataType(const NodeId& parentType, const NodeId& id, const QualifiedName& browseName,
+                       const DataTypeAttributes& attributes = {});
     NodeId addView(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
                    const ViewAttributes& attributes = {});
 
@@ -328,7 +336,7 @@ public:
     // Internal state (defined in address_space_impl.hpp, private to pnp_ua_server).
     struct Impl;
 
-private:
+  private:
     std::unique_ptr<Impl> impl_;
 };
 

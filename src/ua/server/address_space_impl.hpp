@@ -30,12 +30,14 @@ struct AddressSpace::Impl {
     // ---- nodes and ids -------------------------------------------------------------------
     std::vector<Node> nodes;
     std::size_t liveNodes = 0;
-    std::size_t referenceCount = 0;  // each reference once
-    std::vector<NodeIndex> ns0Index;  // numeric ns=0 id -> node
+    std::size_t referenceCount = 0;                             // each reference once
+    std::vector<NodeIndex> ns0Index;                            // numeric ns=0 id -> node
     std::unordered_map<std::uint64_t, NodeIndex> numericIndex;  // other numeric ids
     std::vector<NodeId> otherIds;  // string / guid / opaque ids (Node::idValue indexes it)
     std::unordered_map<NodeId, NodeIndex> otherIndex;
     std::vector<ExpandedNodeId> externalTargets;  // targets on other servers (Ref::kExternal)
+    std::vector<NodeId> internedIds;              // non-numeric ids held by CompactNodeId
+    std::unordered_map<NodeId, std::uint32_t> internedIndex;
     StringPool strings;
     std::vector<String> namespaces;
     std::unordered_map<UInt16, UInt32> nextNumericId;
@@ -46,9 +48,8 @@ struct AddressSpace::Impl {
     std::vector<std::vector<std::uint64_t>> subtypes;
     std::uint16_t rtHasSubtype = kNoRefType, rtHasTypeDefinition = kNoRefType,
                   rtHasComponent = kNoRefType, rtHasProperty = kNoRefType,
-                  rtHasEncoding = kNoRefType, rtOrganizes = kNoRefType,
-                  rtHierarchical = kNoRefType, rtAggregates = kNoRefType,
-                  rtHasModellingRule = kNoRefType;
+                  rtHasEncoding = kNoRefType, rtOrganizes = kNoRefType, rtHierarchical = kNoRefType,
+                  rtAggregates = kNoRefType, rtHasModellingRule = kNoRefType;
 
     // Shared reference arrays of the loaded NodeSets (RefList slices borrow from them).
     std::vector<std::unique_ptr<Ref[]>> refPools;
@@ -56,6 +57,8 @@ struct AddressSpace::Impl {
     std::size_t blobBytesTouched = 0;
 
     std::unordered_map<NodeIndex, std::shared_ptr<const MethodHandler>> methods;
+    // Method copied from an InstanceDeclaration -> the declaration (handler fallback).
+    std::unordered_map<NodeIndex, NodeIndex> methodDeclarations;
     double ns0LoadMs = 0;
 
     // ---- lookups (callers hold the lock) ------------------------------------------------------
@@ -85,6 +88,20 @@ struct AddressSpace::Impl {
     bool isNs0(const NodeId& id, std::uint32_t v) const {
         return id.namespaceIndex() == 0 && id.isNumeric() && id.numeric() == v;
     }
+    CompactNodeId compact(const NodeId& id) {
+        if (id.isNumeric()) return CompactNodeId{id.numeric(), id.namespaceIndex(), 0};
+        auto [it, added] =
+            internedIndex.emplace(id, static_cast<std::uint32_t>(internedIds.size()));
+        if (added) internedIds.push_back(id);
+        return CompactNodeId{it->second, 0, 1};
+    }
+    NodeId expand(const CompactNodeId& c) const {
+        return c.interned ? internedIds[c.value] : NodeId(c.ns, c.value);
+    }
+    NodeIndex find(const CompactNodeId& c) const {
+        if (!c.interned && c.ns == 0) return find(c.value);
+        return find(expand(c));
+    }
     QualifiedName browseNameOf(const Node& n) const {
         return QualifiedName{n.browseNs, String(strings.get(n.browseName))};
     }
@@ -96,7 +113,7 @@ struct AddressSpace::Impl {
         if (i == kNoNode) return kNoRefType;
         const Node& n = nodes[i];
         return (n.nodeClass == NodeClassBits::ReferenceType && n.extra) ? n.extra->refTypeIndex
-                                                                          : kNoRefType;
+                                                                        : kNoRefType;
     }
     bool refTypeMatches(std::uint16_t type, std::uint16_t base, bool includeSubtypes) const {
         if (type == base) return true;
@@ -138,6 +155,20 @@ struct AddressSpace::Impl {
     void rememberWellKnownRefTypes();
     NodeId freshId(UInt16 ns);
     void deleteNode(NodeIndex i, bool children);
+    // Copies the Mandatory InstanceDeclarations of `type` (and supertypes) below `instance`.
+    void instantiate(NodeIndex instance, NodeIndex type, int depth = 0);
+    // Copies the Mandatory aggregated children of `declaration` below `instance`.
+    void copyDeclaredChildren(NodeIndex instance, NodeIndex declaration, int depth);
+    NodeIndex copyDeclaration(NodeIndex parent, std::uint16_t refType, NodeIndex declaration,
+                              int depth);
+    std::shared_ptr<const MethodHandler> handlerOf(NodeIndex method) const {
+        auto h = methods.find(method);
+        if (h != methods.end() && h->second && *h->second) return h->second;
+        auto d = methodDeclarations.find(method);
+        if (d == methodDeclarations.end()) return nullptr;
+        h = methods.find(d->second);
+        return (h != methods.end() && h->second && *h->second) ? h->second : nullptr;
+    }
 
     // ---- NodeSet blobs (nodeset_loader.cpp) -------------------------------------------------
     void loadNodeSet(const Byte* blob, std::size_t size);

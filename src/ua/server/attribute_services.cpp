@@ -95,27 +95,48 @@ bool hasAttribute(const Node& n, AttributeId a) {
 // Write-mask bit guarding a non-Value attribute (0: never writable).
 UInt32 writeMaskBit(AttributeId a) {
     switch (a) {
-        case AttributeId::AccessLevel: return write_mask::AccessLevel;
-        case AttributeId::ArrayDimensions: return write_mask::ArrayDimensions;
-        case AttributeId::BrowseName: return write_mask::BrowseName;
-        case AttributeId::ContainsNoLoops: return write_mask::ContainsNoLoops;
-        case AttributeId::DataType: return write_mask::DataType;
-        case AttributeId::Description: return write_mask::Description;
-        case AttributeId::DisplayName: return write_mask::DisplayName;
-        case AttributeId::EventNotifier: return write_mask::EventNotifier;
-        case AttributeId::Executable: return write_mask::Executable;
-        case AttributeId::Historizing: return write_mask::Historizing;
-        case AttributeId::InverseName: return write_mask::InverseName;
-        case AttributeId::IsAbstract: return write_mask::IsAbstract;
-        case AttributeId::MinimumSamplingInterval: return write_mask::MinimumSamplingInterval;
-        case AttributeId::Symmetric: return write_mask::Symmetric;
-        case AttributeId::UserAccessLevel: return write_mask::UserAccessLevel;
-        case AttributeId::UserExecutable: return write_mask::UserExecutable;
-        case AttributeId::UserWriteMask: return write_mask::UserWriteMask;
-        case AttributeId::ValueRank: return write_mask::ValueRank;
-        case AttributeId::WriteMask: return write_mask::WriteMask;
-        case AttributeId::AccessLevelEx: return write_mask::AccessLevelEx;
-        default: return 0;
+        case AttributeId::AccessLevel:
+            return write_mask::AccessLevel;
+        case AttributeId::ArrayDimensions:
+            return write_mask::ArrayDimensions;
+        case AttributeId::BrowseName:
+            return write_mask::BrowseName;
+        case AttributeId::ContainsNoLoops:
+            return write_mask::ContainsNoLoops;
+        case AttributeId::DataType:
+            return write_mask::DataType;
+        case AttributeId::Description:
+            return write_mask::Description;
+        case AttributeId::DisplayName:
+            return write_mask::DisplayName;
+        case AttributeId::EventNotifier:
+            return write_mask::EventNotifier;
+        case AttributeId::Executable:
+            return write_mask::Executable;
+        case AttributeId::Historizing:
+            return write_mask::Historizing;
+        case AttributeId::InverseName:
+            return write_mask::InverseName;
+        case AttributeId::IsAbstract:
+            return write_mask::IsAbstract;
+        case AttributeId::MinimumSamplingInterval:
+            return write_mask::MinimumSamplingInterval;
+        case AttributeId::Symmetric:
+            return write_mask::Symmetric;
+        case AttributeId::UserAccessLevel:
+            return write_mask::UserAccessLevel;
+        case AttributeId::UserExecutable:
+            return write_mask::UserExecutable;
+        case AttributeId::UserWriteMask:
+            return write_mask::UserWriteMask;
+        case AttributeId::ValueRank:
+            return write_mask::ValueRank;
+        case AttributeId::WriteMask:
+            return write_mask::WriteMask;
+        case AttributeId::AccessLevelEx:
+            return write_mask::AccessLevelEx;
+        default:
+            return 0;
     }
 }
 
@@ -147,7 +168,8 @@ Variant AddressSpace::Impl::decodeDefinition(const Node& n) const {
     return Variant();
 }
 
-std::vector<Argument> AddressSpace::Impl::methodArguments(NodeIndex method, const char* name) const {
+std::vector<Argument> AddressSpace::Impl::methodArguments(NodeIndex method,
+                                                          const char* name) const {
     std::vector<Argument> args;
     NodeIndex prop = kNoNode;
     for (const Ref& r : nodes[method].refs) {
@@ -226,17 +248,27 @@ StatusCode AddressSpace::Impl::checkValue(const Variant& v, NodeIndex dataType, 
     const std::size_t dims = v.isArray() ? std::max<std::size_t>(1, v.arrayDimensions().size()) : 0;
     bool rankOk = false;
     switch (valueRank) {
-        case -3: rankOk = dims <= 1; break;  // ScalarOrOneDimension
-        case -2: rankOk = true; break;       // Any
-        case -1: rankOk = dims == 0; break;  // Scalar
-        case 0: rankOk = dims >= 1; break;   // OneOrMoreDimensions
-        default: rankOk = valueRank > 0 && dims == static_cast<std::size_t>(valueRank); break;
+        case -3:
+            rankOk = dims <= 1;
+            break;  // ScalarOrOneDimension
+        case -2:
+            rankOk = true;
+            break;  // Any
+        case -1:
+            rankOk = dims == 0;
+            break;  // Scalar
+        case 0:
+            rankOk = dims >= 1;
+            break;  // OneOrMoreDimensions
+        default:
+            rankOk = valueRank > 0 && dims == static_cast<std::size_t>(valueRank);
+            break;
     }
     if (!rankOk) return status::BadTypeMismatch;
     if (dims > 0 && arrayDimensions.size() == dims) {
         for (std::size_t k = 0; k < dims; ++k) {
-            std::size_t actual = dims == 1 ? v.arrayLength()
-                                           : static_cast<std::size_t>(v.arrayDimensions()[k]);
+            std::size_t actual =
+                dims == 1 ? v.arrayLength() : static_cast<std::size_t>(v.arrayDimensions()[k]);
             if (arrayDimensions[k] != 0 && actual > arrayDimensions[k])
                 return status::BadTypeMismatch;
         }
@@ -309,22 +341,34 @@ DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>&
                 StatusCode s = readRange(*dv.value, *range, cut);
                 if (s.isBad()) return bad(s);
                 dv.value = std::move(cut);
-            } else if (range) {
+            } else if (range && dv.statusOrGood().isGood()) {
                 return bad(status::BadIndexRangeNoData);
             }
             applyTimestamps(dv, timestamps, DateTime::now());
             return dv;
         }
-        case AttributeId::NodeId: v = Variant(idOf(i)); break;
-        case AttributeId::NodeClass: v = Variant(static_cast<Int32>(cls)); break;
-        case AttributeId::BrowseName: v = Variant(browseNameOf(n)); break;
-        case AttributeId::DisplayName: v = Variant(displayNameOf(n)); break;
+        case AttributeId::NodeId:
+            v = Variant(idOf(i));
+            break;
+        case AttributeId::NodeClass:
+            v = Variant(static_cast<Int32>(cls));
+            break;
+        case AttributeId::BrowseName:
+            v = Variant(browseNameOf(n));
+            break;
+        case AttributeId::DisplayName:
+            v = Variant(displayNameOf(n));
+            break;
         case AttributeId::Description:
             v = Variant(LocalizedText(String(strings.get(n.descriptionLocale)),
                                       String(strings.get(n.descriptionText))));
             break;
-        case AttributeId::WriteMask: v = Variant(n.writeMask); break;
-        case AttributeId::UserWriteMask: v = Variant(n.userWriteMask); break;
+        case AttributeId::WriteMask:
+            v = Variant(n.writeMask);
+            break;
+        case AttributeId::UserWriteMask:
+            v = Variant(n.userWriteMask);
+            break;
         case AttributeId::IsAbstract:
             if (!isType(n)) return invalid();
             v = Variant(n.has(Node::kIsAbstract));
@@ -351,7 +395,7 @@ DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>&
             break;
         case AttributeId::DataType:
             if (!isVariableLike(n)) return invalid();
-            v = Variant(n.extra->dataType);
+            v = Variant(expand(n.extra->dataType));
             break;
         case AttributeId::ValueRank:
             if (!isVariableLike(n)) return invalid();
@@ -367,13 +411,16 @@ DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>&
         case AttributeId::MinimumSamplingInterval:
         case AttributeId::Historizing:
             if (cls != NodeClassBits::Variable || !n.extra) return invalid();
-            if (attr == AttributeId::AccessLevel) v = Variant(n.extra->accessLevel);
-            else if (attr == AttributeId::UserAccessLevel) v = Variant(n.extra->userAccessLevel);
+            if (attr == AttributeId::AccessLevel)
+                v = Variant(n.extra->accessLevel);
+            else if (attr == AttributeId::UserAccessLevel)
+                v = Variant(n.extra->userAccessLevel);
             else if (attr == AttributeId::AccessLevelEx)
                 v = Variant(static_cast<UInt32>(n.extra->accessLevel));
             else if (attr == AttributeId::MinimumSamplingInterval)
                 v = Variant(n.extra->minimumSamplingInterval);
-            else v = Variant(n.has(Node::kHistorizing));
+            else
+                v = Variant(n.has(Node::kHistorizing));
             break;
         case AttributeId::Executable:
             if (cls != NodeClassBits::Method) return invalid();
@@ -522,9 +569,12 @@ StatusCode AddressSpace::Impl::writeAttribute(std::unique_lock<std::shared_mutex
             case AttributeId::UserAccessLevel: {
                 const auto* b = v.scalar<Byte>();
                 if (!b) return status::BadTypeMismatch;
-                if (attr == AttributeId::EventNotifier) n.eventNotifier = *b;
-                else if (attr == AttributeId::AccessLevel) n.extra->accessLevel = *b;
-                else n.extra->userAccessLevel = *b;
+                if (attr == AttributeId::EventNotifier)
+                    n.eventNotifier = *b;
+                else if (attr == AttributeId::AccessLevel)
+                    n.extra->accessLevel = *b;
+                else
+                    n.extra->userAccessLevel = *b;
                 return kGood;
             }
             case AttributeId::AccessLevelEx: {
@@ -559,7 +609,7 @@ StatusCode AddressSpace::Impl::writeAttribute(std::unique_lock<std::shared_mutex
                 NodeIndex dt = find(*d);
                 if (dt == kNoNode || nodes[dt].nodeClass != NodeClassBits::DataType)
                     return status::BadTypeMismatch;
-                n.extra->dataType = *d;
+                n.extra->dataType = compact(*d);
                 return kGood;
             }
             default:

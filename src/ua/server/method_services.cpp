@@ -9,7 +9,8 @@ namespace {
 
 // Collects the results of one Call request; completes it when the last method finished.
 struct CallState {
-    CallState(std::size_t n, std::function<void(CallResponse)> d) : pending(n + 1), done(std::move(d)) {
+    CallState(std::size_t n, std::function<void(CallResponse)> d)
+        : pending(n + 1), done(std::move(d)) {
         response.results.resize(n);
     }
     // Records a result; the last one (pending reaches 0) delivers the response.
@@ -73,7 +74,7 @@ bool methodBelongsTo(const AddressSpace::Impl& s, NodeIndex object, NodeIndex me
     };
     if (hasComponent(object)) return true;
     NodeIndex type = s.nodes[object].nodeClass == NodeClassBits::Object ? s.typeDefinitionOf(object)
-                                                                         : s.supertypeOf(object);
+                                                                        : s.supertypeOf(object);
     for (int depth = 0; type != kNoNode && depth < 64; ++depth) {
         if (hasComponent(type)) return true;
         type = s.supertypeOf(type);
@@ -141,12 +142,13 @@ void AddressSpace::call(const CallRequest& request, const NodeId& sessionId,
                         st = status::BadInvalidArgument;
                         res.inputArgumentResults = std::move(argResults);
                     } else {
-                        auto h = s.methods.find(method);
-                        if (h == s.methods.end() || !h->second || !*h->second) {
+                        auto h = s.handlerOf(method);
+                        if (h == nullptr) {
                             st = status::BadNotImplemented;
                         } else {
-                            runs.push_back(Run{k, h->second,
-                                               MethodCallContext{m.objectId, m.methodId, sessionId}});
+                            runs.push_back(
+                                Run{k, std::move(h),
+                                    MethodCallContext{m.objectId, m.methodId, sessionId}});
                             continue;
                         }
                     }

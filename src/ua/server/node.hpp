@@ -122,7 +122,7 @@ inline constexpr UInt32 AccessLevelEx = 1u << 25;
 using StrId = std::uint32_t;  // 0 is always ""
 
 class StringPool {
-public:
+  public:
     StringPool();
     std::string_view get(StrId id) const { return views_[id]; }
     // Interns a copy of s.
@@ -137,7 +137,7 @@ public:
     std::size_t size() const { return views_.size(); }
     std::size_t bytesUsed() const;
 
-private:
+  private:
     std::vector<std::string_view> views_;
     std::deque<std::string> owned_;
     std::unordered_map<std::string_view, StrId> index_;  // built lazily on first intern()
@@ -160,7 +160,7 @@ struct Ref {
 // A small array of references that either borrows a slice of a shared array (capacity 0)
 // or owns its storage. Appending to a borrowed list copies it first.
 class RefList {
-public:
+  public:
     RefList() = default;
     RefList(Ref* borrowed, std::uint32_t size) : data_(borrowed), size_(size) {}
     RefList(const RefList&) = delete;
@@ -188,7 +188,7 @@ public:
     }
     std::size_t heapBytes() const { return cap_ * sizeof(Ref); }
 
-private:
+  private:
     void release() {
         if (cap_ != 0) delete[] data_;
         cap_ = 0;
@@ -212,12 +212,20 @@ struct ValueSlot {
     bool empty() const { return encoded == nullptr && !owned; }
 };
 
+// A NodeId in 8 bytes: numeric ids inline, others as an index into a table of interned ids
+// (AddressSpace::Impl::internedIds).
+struct CompactNodeId {
+    std::uint32_t value = 0;
+    std::uint16_t ns = 0;
+    std::uint8_t interned = 0;
+};
+
 // Data of the node classes that need more than the common attributes.
 struct NodeExtra {
     // Variable, VariableType
-    NodeId dataType;
     std::vector<UInt32> arrayDimensions;
     double minimumSamplingInterval = 0;
+    CompactNodeId dataType{24, 0, 0};  // BaseDataType
     Int32 valueRank = -1;
     Byte accessLevel = access_level::CurrentRead;
     Byte userAccessLevel = access_level::CurrentRead;

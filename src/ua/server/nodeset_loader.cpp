@@ -19,7 +19,7 @@ std::size_t namespaceZeroBlobNodeCount() { return generated::kNs0BlobNodeCount; 
 namespace {
 
 class BlobReader {
-public:
+  public:
     BlobReader(const Byte* p, std::size_t n) : p_(p), end_(p + n) {}
 
     std::uint64_t varint() {
@@ -64,7 +64,7 @@ public:
         throw AddressSpaceError(status::BadDecodingError, "corrupt NodeSet blob");
     }
 
-private:
+  private:
     const Byte* p_;
     const Byte* end_;
 };
@@ -73,7 +73,18 @@ private:
 
 void AddressSpace::Impl::loadNodeSet(const Byte* blob, std::size_t size) {
     BlobReader in(blob, size);
-    if (size < 8 || std::memcmp(in.take(8), "PNPNSET1", 8) != 0) BlobReader::fail();
+    if (size < 12 || std::memcmp(in.take(8), "PNPNSET1", 8) != 0) BlobReader::fail();
+    std::uint32_t valuesAt;
+    std::memcpy(&valuesAt, in.take(4), 4);
+    if (valuesAt > size) BlobReader::fail();
+    const Byte* values = blob + valuesAt;
+    const std::size_t valuesSize = size - valuesAt;
+    auto readValue = [&](ValueSlot& slot) {
+        std::uint64_t at = in.varint(), len = in.varint();
+        if (at > valuesSize || len > valuesSize - at) BlobReader::fail();
+        slot.encoded = values + at;
+        slot.encodedSize = static_cast<std::uint32_t>(len);
+    };
     const std::size_t nodeCount = in.varint();
     const std::size_t refCount = in.varint();
 
@@ -186,7 +197,7 @@ void AddressSpace::Impl::loadNodeSet(const Byte* blob, std::size_t size) {
             case NodeClassBits::Variable:
             case NodeClassBits::VariableType: {
                 auto x = std::make_unique<NodeExtra>();
-                x->dataType = readNodeId();
+                x->dataType = compact(readNodeId());
                 x->valueRank = static_cast<Int32>(in.svarint());
                 if (cls == NodeClassBits::Variable) {
                     x->accessLevel = in.byte();
@@ -197,11 +208,7 @@ void AddressSpace::Impl::loadNodeSet(const Byte* blob, std::size_t size) {
                     x->arrayDimensions.resize(in.varint());
                     for (auto& d : x->arrayDimensions) d = in.u32();
                 }
-                if (flags & 0x0100) {
-                    std::size_t len = in.varint();
-                    x->value.encoded = in.take(len);
-                    x->value.encodedSize = static_cast<std::uint32_t>(len);
-                }
+                if (flags & 0x0100) readValue(x->value);
                 n.extra = std::move(x);
                 break;
             }
@@ -219,9 +226,7 @@ void AddressSpace::Impl::loadNodeSet(const Byte* blob, std::size_t size) {
             case NodeClassBits::DataType:
                 if (flags & 0x0400) {
                     auto x = std::make_unique<NodeExtra>();
-                    std::size_t len = in.varint();
-                    x->value.encoded = in.take(len);
-                    x->value.encodedSize = static_cast<std::uint32_t>(len);
+                    readValue(x->value);
                     n.extra = std::move(x);
                 }
                 break;
@@ -231,39 +236,33 @@ void AddressSpace::Impl::loadNodeSet(const Byte* blob, std::size_t size) {
         ++liveNodes;
     }
 
-    // References: count per node, then hand out slices of one shared array.
-    struct Triple {
-        NodeIndex source, type, target;
-    };
-    std::vector<Triple> triples(refCount);
-    std::vector<std::uint32_t> counts(nodeCount, 0);
-    for (auto& t : triples) {
-        t.source = in.u32();
-        t.type = in.u32();
-        t.target = in.u32();
-        if (t.source >= nodeCount || t.type >= nodeCount || t.target >= nodeCount)
-            BlobReader::fail();
-        ++counts[t.source];
-        ++counts[t.target];
+    // References: one pass counts them per node (both ends), a second one fills the slices
+    // of one shared array (no per-node allocation, no temporary copy of the references).
+    const Byte* refsAt = in.position();
+    std::vector<std::uint32_t> slot(nodeCount + 1, 0);
+    for (std::size_t k = 0; k < refCount; ++k) {
+        std::uint32_t source = in.u32(), type = in.u32(), target = in.u32();
+        if (source >= nodeCount || type >= nodeCount || target >= nodeCount) BlobReader::fail();
+        ++slot[source + 1];
+        ++slot[target + 1];
     }
     blobBytesTouched += static_cast<std::size_t>(in.position() - blob);
+    for (std::size_t k = 0; k < nodeCount; ++k) slot[k + 1] += slot[k];  // start offsets
     std::unique_ptr<Ref[]> pool(new Ref[2 * refCount]);
-    std::vector<std::uint32_t> offset(nodeCount, 0);
-    std::uint32_t at = 0;
-    for (std::size_t k = 0; k < nodeCount; ++k) {
-        offset[k] = at;
-        at += counts[k];
-    }
-    std::vector<std::uint32_t> fill(nodeCount, 0);
-    for (const auto& t : triples) {
-        std::uint16_t type = refTypeIndexOf(first + t.type);
+    BlobReader again(refsAt, static_cast<std::size_t>(in.position() - refsAt));
+    for (std::size_t k = 0; k < refCount; ++k) {
+        std::uint32_t source = again.u32(), typeNode = again.u32(), target = again.u32();
+        std::uint16_t type = refTypeIndexOf(first + typeNode);
         if (type == kNoRefType)
             throw AddressSpaceError(status::BadReferenceTypeIdInvalid, "NodeSet reference");
-        pool[offset[t.source] + fill[t.source]++] = Ref{first + t.target, type, 0};
-        pool[offset[t.target] + fill[t.target]++] = Ref{first + t.source, type, Ref::kInverse};
+        pool[slot[source]++] = Ref{first + target, type, 0};
+        pool[slot[target]++] = Ref{first + source, type, Ref::kInverse};
     }
-    for (std::size_t k = 0; k < nodeCount; ++k)
-        if (counts[k] != 0) nodes[first + k].refs = RefList(pool.get() + offset[k], counts[k]);
+    // slot[k] now is the end of node k's slice, i.e. the start of node k + 1's.
+    for (std::size_t k = 0; k < nodeCount; ++k) {
+        std::uint32_t begin = k == 0 ? 0 : slot[k - 1];
+        if (slot[k] != begin) nodes[first + k].refs = RefList(pool.get() + begin, slot[k] - begin);
+    }
     referenceCount += refCount;
     refPoolBytes += 2 * refCount * sizeof(Ref);
     refPools.push_back(std::move(pool));

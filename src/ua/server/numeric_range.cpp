@@ -103,8 +103,10 @@ StatusCode readArray(const Variant& v, const std::vector<T>& arr,
     const bool bytes = kIsByteSequence<T>;
     std::size_t rank = shape.size();
     bool inner = false;  // one extra dimension indexing the bytes of each element
-    if (range.size() == rank + 1 && bytes) inner = true;
-    else if (range.size() != rank) return status::BadIndexRangeNoData;
+    if (range.size() == rank + 1 && bytes)
+        inner = true;
+    else if (range.size() != rank)
+        return status::BadIndexRangeNoData;
     std::vector<T> result;
     std::vector<std::size_t> block;
     bool ok = forEachInBlock(shape, range, block, true,
@@ -184,8 +186,8 @@ std::optional<NumericRange> NumericRange::parse(std::string_view text) {
     std::size_t pos = 0;
     while (true) {
         std::size_t comma = text.find(',', pos);
-        std::string_view part =
-            text.substr(pos, comma == std::string_view::npos ? std::string_view::npos : comma - pos);
+        std::string_view part = text.substr(
+            pos, comma == std::string_view::npos ? std::string_view::npos : comma - pos);
         Dimension d;
         std::size_t colon = part.find(':');
         if (colon == std::string_view::npos) {

@@ -24,7 +24,7 @@
 namespace pnp::ua::server {
 
 class NumericRange {
-public:
+  public:
     struct Dimension {
         UInt32 min = 0;
         UInt32 max = 0;  // inclusive; == min for a single index
@@ -44,7 +44,7 @@ public:
     std::string toString() const;
     bool operator==(const NumericRange&) const = default;
 
-private:
+  private:
     std::vector<Dimension> dims_;
 };
 

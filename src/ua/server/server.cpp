@@ -146,11 +146,10 @@ void Server::setUpServerObject() {
                              return DataValue(Variant(toExtensionObject(s)));
                          },
                          {}});
-    as.setValueCallback(NodeId(0, ns0::Server_NamespaceArray),
-                        {[this](const NodeId&) {
-                             return DataValue(Variant(addressSpace_->namespaceArray()));
-                         },
-                         {}});
+    as.setValueCallback(
+        NodeId(0, ns0::Server_NamespaceArray),
+        {[this](const NodeId&) { return DataValue(Variant(addressSpace_->namespaceArray())); },
+         {}});
 
     const auto& lim = config_.limits;
     set(ns0::Server_ServerCapabilities_ServerProfileArray,
@@ -224,8 +223,7 @@ void sendResponse(transport::ServerConnection& conn, UInt32 requestId, const Req
 
 template <class Req>
 bool Server::accept(const std::shared_ptr<transport::ServerConnection>& conn,
-                    const transport::IncomingRequest& in, bool needsSession, Req& req,
-                    Ctx& ctx) {
+                    const transport::IncomingRequest& in, bool needsSession, Req& req, Ctx& ctx) {
     try {
         BinaryDecoder d(in.body, in.size, config_.decodeLimits);
         decode(d, req);
@@ -334,14 +332,13 @@ void Server::getEndpoints(Ctx& ctx, const GetEndpointsRequest& req, GetEndpoints
     bool wantsTcp = req.profileUris.empty();
     for (const auto& p : req.profileUris) wantsTcp |= p == kTransportProfile;
     if (wantsTcp)
-        resp.endpoints =
-            endpointDescriptions(req.endpointUrl.empty() ? ctx.conn->endpointUrl() : req.endpointUrl);
+        resp.endpoints = endpointDescriptions(req.endpointUrl.empty() ? ctx.conn->endpointUrl()
+                                                                      : req.endpointUrl);
 }
 
 void Server::findServers(Ctx&, const FindServersRequest& req, FindServersResponse& resp) {
-    if (!req.serverUris.empty() &&
-        std::find(req.serverUris.begin(), req.serverUris.end(), config_.applicationUri) ==
-            req.serverUris.end())
+    if (!req.serverUris.empty() && std::find(req.serverUris.begin(), req.serverUris.end(),
+                                             config_.applicationUri) == req.serverUris.end())
         return;
     resp.servers = {applicationDescription()};
 }

@@ -43,10 +43,10 @@ struct ServerConfig {
     std::string softwareVersion = "0.1.0";
     std::string buildNumber = "1";
 
-    std::string host = "0.0.0.0";     // listen address
-    std::string publicHost;           // host name put into endpoint URLs; default: hostname
-    UInt16 port = 4840;               // 0: ephemeral
-    std::string endpointPath;         // e.g. "/pnp"
+    std::string host = "0.0.0.0";  // listen address
+    std::string publicHost;        // host name put into endpoint URLs; default: hostname
+    UInt16 port = 4840;            // 0: ephemeral
+    std::string endpointPath;      // e.g. "/pnp"
 
     transport::ServerTransportConfig transport;
     OperationLimits limits;
@@ -59,8 +59,8 @@ struct ServerConfig {
     std::shared_ptr<AccessControl> accessControl;  // default: anonymous only
 };
 
-class Server : private transport::ServiceHandler {
-public:
+class Server : public transport::ServiceHandler {
+  public:
     explicit Server(ServerConfig config = {});
     ~Server() override;
     Server(const Server&) = delete;
@@ -84,7 +84,7 @@ public:
     // Open sessions (any thread).
     std::size_t sessionCount() const { return sessionCount_.load(std::memory_order_relaxed); }
 
-private:
+  private:
     struct Session;
     struct Ctx;
 

@@ -87,8 +87,9 @@ BrowseResult browseFrom(const AddressSpace::Impl& s, const BrowseDescription& de
             resume = pos;
             return result;
         }
-        if (result.references.empty()) result.references.reserve(std::min<std::size_t>(
-            maxReferences ? maxReferences : refs.size() - pos, refs.size() - pos));
+        if (result.references.empty())
+            result.references.reserve(std::min<std::size_t>(
+                maxReferences ? maxReferences : refs.size() - pos, refs.size() - pos));
         result.references.push_back(s.describe(r, desc.resultMask));
     }
     return result;
@@ -174,8 +175,8 @@ BrowseNextResponse AddressSpace::browseNext(const BrowseNextRequest& request,
         if (!request.releaseContinuationPoints) {
             bool wantPoint = false;
             std::uint32_t resume = 0;
-            r = browseFrom(s, point.description, point.maxReferences, point.position,
-                           wantPoint, resume);
+            r = browseFrom(s, point.description, point.maxReferences, point.position, wantPoint,
+                           resume);
             if (wantPoint) {
                 point.position = resume;
                 r.continuationPoint = points.add(std::move(point));  // a slot was just freed
@@ -213,8 +214,9 @@ TranslateBrowsePathsToNodeIdsResponse AddressSpace::translateBrowsePaths(
             result.statusCode = status::BadNodeIdUnknown;
         } else if (elements.empty()) {
             result.statusCode = status::BadNothingToDo;
-        } else if (std::any_of(elements.begin(), elements.end(),
-                               [](const RelativePathElement& e) { return e.targetName.name.empty(); })) {
+        } else if (std::any_of(elements.begin(), elements.end(), [](const RelativePathElement& e) {
+                       return e.targetName.name.empty();
+                   })) {
             result.statusCode = status::BadBrowseNameInvalid;
         } else {
             current.assign(1, start);

@@ -221,8 +221,10 @@ void ServerChannel::handleOpen(UInt32 requestId, const Byte* body, std::size_t s
                              "only MessageSecurityMode None is supported");
     }
 
-    auto lifetime = std::clamp(std::chrono::milliseconds(req.requestedLifetime),
-                               config_.minTokenLifetime, config_.maxTokenLifetime);
+    // Clamped to [min, max]; max wins if a configuration has them the wrong way round.
+    auto lifetime = std::min(
+        std::max(std::chrono::milliseconds(req.requestedLifetime), config_.minTokenLifetime),
+        config_.maxTokenLifetime);
     if (!renew) channelId_ = hooks_.newChannelId();
     TokenState token{nextTokenId_++, now, lifetime};
     if (nextTokenId_ == 0) nextTokenId_ = 1;

@@ -40,7 +40,8 @@ struct IncomingResponse {
 struct ServerTransportConfig : TransportLimits {
     std::string host = "0.0.0.0";  // listen address (name or literal), "::" for IPv6
     UInt16 port = 4840;            // 0: ephemeral, see TcpServer::port()
-    // Connections beyond this are refused with an ERR BadTcpServerTooBusy.
+    // Connections beyond this are refused with an ERR BadTcpServerTooBusy. Worst-case
+    // memory is about maxConnections * (maxMessageSize + receiveBufferSize + 4 MiB).
     std::size_t maxConnections = 1000;
     // A connection that has not completed HEL/ACK and OpenSecureChannel within this time is
     // closed (ERR BadTimeout).

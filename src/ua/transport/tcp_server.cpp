@@ -19,6 +19,10 @@ namespace {
 constexpr std::chrono::milliseconds kLinger{2000};
 // Period of the sweep over all connections (hello / idle timeouts, token expiry, linger).
 constexpr std::chrono::milliseconds kHousekeeping{100};
+// Backpressure: while more than this many response bytes wait for the socket, the
+// connection stops reading requests (a client that sends but never reads cannot make the
+// server queue without bound).
+constexpr std::size_t kMaxQueuedOutput = 4u << 20;
 
 using asio::ip::tcp;
 
@@ -175,7 +179,10 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     }
 
     // ---- ServerChannel::Hooks ---------------------------------------------------------
-    void write(Buffer&& bytes) override { pending_.push_back(std::move(bytes)); }
+    void write(Buffer&& bytes) override {
+        queuedBytes_ += bytes.size();
+        pending_.push_back(std::move(bytes));
+    }
 
     void request(const IncomingRequest& r) override {
         auto s = std::static_pointer_cast<ServerConnection>(self());
@@ -204,6 +211,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
 
     void startRead() {
         if (finished_ || readInFlight_) return;
+        if (queuedBytes_ > kMaxQueuedOutput && !lingering_) return;  // resumed by onWritten
         auto space = channel_.readSpace();
         readInFlight_ = true;
         socket_->async_read_some(
@@ -241,6 +249,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
 
     void onWritten(const asio::error_code& ec) {
         writeInFlight_ = false;
+        for (const auto& b : writing_) queuedBytes_ -= b.size();
         writing_.clear();
         if (finished_) return;
         if (ec) {
@@ -250,6 +259,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         }
         flush();
         if (lingering_ && !writeInFlight_) sendFin();
+        startRead();  // no-op unless paused by backpressure
     }
 
     // The channel is closed: write what is pending, send FIN, read until the peer closes.
@@ -279,6 +289,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         // keeps a ServerConnection the upper layer still holds from touching the
         // io_context after the server is gone.
         socket_.reset();
+        for (const auto& b : pending_) queuedBytes_ -= b.size();
         pending_.clear();
         server_.removeConnection(self(), notify && !rejected_);
     }
@@ -300,6 +311,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     bool lingering_ = false;
     bool finSent_ = false;
     bool finished_ = false;
+    std::size_t queuedBytes_ = 0;  // in pending_ + writing_
     TimePoint lingerUntil_{};
 };
 

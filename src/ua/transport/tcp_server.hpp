@@ -26,6 +26,11 @@
 // Errors on a connection (protocol violations, limits, timeouts) are answered with an ERR
 // message and close that connection only. The connection then lingers briefly (reads and
 // discards until the peer closes, at most 2 s) so that the ERR is not lost in a TCP reset.
+//
+// Memory per connection: the receive buffer (receiveBufferSize + 16 KiB, allocated once),
+// one message being reassembled (at most maxMessageSize) and the responses waiting for the
+// socket. While more than 4 MiB of responses wait (a client that sends but does not read),
+// the connection stops reading requests until the backlog drains.
 #pragma once
 
 #include <chrono>

@@ -26,23 +26,25 @@ struct DecodeLimits {
 };
 
 class DecodeError : public std::runtime_error {
-public:
+  public:
     DecodeError(StatusCode s, const std::string& what) : std::runtime_error(what), status_(s) {}
     StatusCode status() const { return status_; }
 
-private:
+  private:
     StatusCode status_;
 };
 
 using Buffer = std::vector<Byte>;
 
 class BinaryEncoder {
-public:
+  public:
     explicit BinaryEncoder(Buffer& out) : out_(out) {}
 
     void raw(const void* p, std::size_t n) {
-        auto b = static_cast<const Byte*>(p);
-        out_.insert(out_.end(), b, b + n);
+        if (n == 0) return;
+        std::size_t at = out_.size();
+        out_.resize(at + n);
+        std::memcpy(out_.data() + at, p, n);
     }
     template <class T>
     void number(T v) {
@@ -60,12 +62,12 @@ public:
     Buffer& buffer() { return out_; }
     std::size_t size() const { return out_.size(); }
 
-private:
+  private:
     Buffer& out_;
 };
 
 class BinaryDecoder {
-public:
+  public:
     BinaryDecoder(const Byte* data, std::size_t size, const DecodeLimits& limits = {})
         : p_(data), end_(data + size), limits_(limits) {}
 
@@ -107,20 +109,20 @@ public:
 
     // RAII guard for recursion through Variant / DataValue / DiagnosticInfo.
     class Nested {
-    public:
+      public:
         explicit Nested(BinaryDecoder& d);
         ~Nested() { --d_.depth_; }
         Nested(const Nested&) = delete;
         Nested& operator=(const Nested&) = delete;
 
-    private:
+      private:
         BinaryDecoder& d_;
     };
 
     [[noreturn]] static void fail(const std::string& what);
     [[noreturn]] static void limit(const std::string& what);
 
-private:
+  private:
     void need(std::size_t n) const {
         if (n > remaining()) fail("message truncated");
     }
@@ -132,8 +134,8 @@ private:
 };
 
 // ---- numbers -------------------------------------------------------------------------
-#define PNP_UA_NUMBER_CODEC(T)                                                  \
-    inline void encode(BinaryEncoder& e, T v) { e.number<T>(v); }               \
+#define PNP_UA_NUMBER_CODEC(T)                                    \
+    inline void encode(BinaryEncoder& e, T v) { e.number<T>(v); } \
     inline void decode(BinaryDecoder& d, T& v) { v = d.number<T>(); }
 PNP_UA_NUMBER_CODEC(SByte)
 PNP_UA_NUMBER_CODEC(Byte)
@@ -182,13 +184,17 @@ void decode(BinaryDecoder& d, DataValue& v);
 // Smallest encoded size of one element, used to reject impossible array counts early.
 template <class T>
 constexpr std::size_t minEncodedSize() {
-    if constexpr (std::is_arithmetic_v<T>) return sizeof(T);
-    else if constexpr (std::is_same_v<T, Guid>) return 16;
-    else if constexpr (std::is_same_v<T, DateTime> || std::is_same_v<T, StatusCode>) return sizeof(T);
+    if constexpr (std::is_arithmetic_v<T>)
+        return sizeof(T);
+    else if constexpr (std::is_same_v<T, Guid>)
+        return 16;
+    else if constexpr (std::is_same_v<T, DateTime> || std::is_same_v<T, StatusCode>)
+        return sizeof(T);
     else if constexpr (std::is_same_v<T, String> || std::is_same_v<T, ByteString> ||
                        std::is_same_v<T, XmlElement>)
         return 4;
-    else return 1;
+    else
+        return 1;
 }
 
 // ---- arrays --------------------------------------------------------------------------
@@ -212,9 +218,12 @@ void decode(BinaryDecoder& d, std::vector<T>& v) {
         v.resize(n);
         for (std::size_t i = 0; i < n; ++i) v[i] = d.byte() != 0;
     } else {
+        // Appended as they are decoded: the count is only checked against the bytes left,
+        // and nested arrays (Variant arrays of Variant arrays ...) all check it against the
+        // same bytes, so sizing every level up front multiplied memory with the depth.
         v.clear();
-        v.resize(n);
-        for (auto& x : v) decode(d, x);
+        v.reserve(n < 1024 ? n : 1024);
+        for (std::size_t i = 0; i < n; ++i) decode(d, v.emplace_back());
     }
 }
 

@@ -9,11 +9,11 @@ namespace pnp::ua {
 
 namespace {
 constexpr std::string_view kBuiltinNames[kBuiltinTypeCount] = {
-    "Null",       "Boolean",       "SByte",          "Byte",           "Int16",
-    "UInt16",     "Int32",         "UInt32",         "Int64",          "UInt64",
-    "Float",      "Double",        "String",         "DateTime",       "Guid",
-    "ByteString", "XmlElement",    "NodeId",         "ExpandedNodeId", "StatusCode",
-    "QualifiedName", "LocalizedText", "ExtensionObject", "DataValue",  "Variant",
+    "Null",          "Boolean",       "SByte",           "Byte",           "Int16",
+    "UInt16",        "Int32",         "UInt32",          "Int64",          "UInt64",
+    "Float",         "Double",        "String",          "DateTime",       "Guid",
+    "ByteString",    "XmlElement",    "NodeId",          "ExpandedNodeId", "StatusCode",
+    "QualifiedName", "LocalizedText", "ExtensionObject", "DataValue",      "Variant",
     "DiagnosticInfo"};
 
 template <class T>
@@ -77,8 +77,8 @@ std::optional<DateTime> DateTime::parseIso8601(std::string_view s) {
     int y, mo, d, h, mi, sec;
     char tail[32] = {0};
     std::string str(s.substr(0, 60));
-    if (std::sscanf(str.c_str(), "%4d-%2d-%2dT%2d:%2d:%2d%31s", &y, &mo, &d, &h, &mi, &sec,
-                    tail) < 6)
+    if (std::sscanf(str.c_str(), "%4d-%2d-%2dT%2d:%2d:%2d%31s", &y, &mo, &d, &h, &mi, &sec, tail) <
+        6)
         return std::nullopt;
     std::tm tm{};
     tm.tm_year = y - 1900;
@@ -106,9 +106,9 @@ std::optional<DateTime> DateTime::parseIso8601(std::string_view s) {
 // ---- Guid ------------------------------------------------------------------------------
 std::string Guid::toString() const {
     char buf[40];
-    std::snprintf(buf, sizeof buf, "%08X-%04X-%04X-%02X%02X-%02X%02X%02X%02X%02X%02X", data1,
-                  data2, data3, data4[0], data4[1], data4[2], data4[3], data4[4], data4[5],
-                  data4[6], data4[7]);
+    std::snprintf(buf, sizeof buf, "%08X-%04X-%04X-%02X%02X-%02X%02X%02X%02X%02X%02X", data1, data2,
+                  data3, data4[0], data4[1], data4[2], data4[3], data4[4], data4[5], data4[6],
+                  data4[7]);
     return buf;
 }
 
@@ -191,10 +191,14 @@ std::optional<ByteString> ByteString::fromBase64(std::string_view s) {
 bool NodeId::isNull() const {
     if (ns_ != 0) return false;
     switch (idType()) {
-        case IdType::Numeric: return numeric() == 0;
-        case IdType::String: return string().empty();
-        case IdType::Guid: return guid() == Guid{};
-        case IdType::Opaque: return opaque().empty();
+        case IdType::Numeric:
+            return numeric() == 0;
+        case IdType::String:
+            return string().empty();
+        case IdType::Guid:
+            return guid() == Guid{};
+        case IdType::Opaque:
+            return opaque().empty();
     }
     return false;
 }
@@ -203,10 +207,18 @@ std::string NodeId::toString() const {
     std::string out;
     if (ns_ != 0) out = "ns=" + std::to_string(ns_) + ";";
     switch (idType()) {
-        case IdType::Numeric: out += "i=" + std::to_string(numeric()); break;
-        case IdType::String: out += "s=" + string(); break;
-        case IdType::Guid: out += "g=" + guid().toString(); break;
-        case IdType::Opaque: out += "b=" + opaque().toBase64(); break;
+        case IdType::Numeric:
+            out += "i=" + std::to_string(numeric());
+            break;
+        case IdType::String:
+            out += "s=" + string();
+            break;
+        case IdType::Guid:
+            out += "g=" + guid().toString();
+            break;
+        case IdType::Opaque:
+            out += "b=" + opaque().toBase64();
+            break;
     }
     return out;
 }
@@ -227,7 +239,8 @@ std::optional<NodeId> NodeId::parse(std::string_view s) {
             if (!parseNumber(v, id)) return std::nullopt;
             return NodeId(ns, id);
         }
-        case 's': return NodeId(ns, std::string(v));
+        case 's':
+            return NodeId(ns, std::string(v));
         case 'g': {
             auto g = Guid::parse(v);
             if (!g) return std::nullopt;
@@ -245,12 +258,17 @@ std::optional<NodeId> NodeId::parse(std::string_view s) {
 std::size_t NodeId::hash() const {
     std::size_t h = std::hash<UInt16>()(ns_) * 0x9E3779B97F4A7C15ull;
     switch (idType()) {
-        case IdType::Numeric: return h ^ std::hash<UInt32>()(numeric());
-        case IdType::String: return h ^ std::hash<std::string>()(string());
-        case IdType::Guid: return h ^ std::hash<std::string_view>()(std::string_view(
-                                          reinterpret_cast<const char*>(&guid().data1), 4)) ^
-                                  guid().data4[7];
-        case IdType::Opaque: return h ^ std::hash<std::string>()(opaque().bytes) ^ 0x55;
+        case IdType::Numeric:
+            return h ^ std::hash<UInt32>()(numeric());
+        case IdType::String:
+            return h ^ std::hash<std::string>()(string());
+        case IdType::Guid:
+            return h ^
+                   std::hash<std::string_view>()(
+                       std::string_view(reinterpret_cast<const char*>(&guid().data1), 4)) ^
+                   guid().data4[7];
+        case IdType::Opaque:
+            return h ^ std::hash<std::string>()(opaque().bytes) ^ 0x55;
     }
     return h;
 }
@@ -324,17 +342,14 @@ std::size_t Variant::arrayLength() const {
         data_);
 }
 
-bool Variant::operator==(const Variant& o) const {
-    return data_ == o.data_ && dims_ == o.dims_;
-}
+bool Variant::operator==(const Variant& o) const { return data_ == o.data_ && dims_ == o.dims_; }
 
 namespace {
 std::string scalarToString(const Boolean& v) { return v ? "true" : "false"; }
 template <class T>
-std::string scalarToString(const T& v)
-    requires std::is_arithmetic_v<T>
-{
-    if constexpr (sizeof(T) == 1) return std::to_string(static_cast<int>(v));
+std::string scalarToString(const T& v) requires std::is_arithmetic_v<T> {
+    if constexpr (sizeof(T) == 1)
+        return std::to_string(static_cast<int>(v));
     else if constexpr (std::is_floating_point_v<T>) {
         char buf[64];
         std::snprintf(buf, sizeof buf, "%.17g", static_cast<double>(v));
@@ -345,15 +360,17 @@ std::string scalarToString(const T& v)
 std::string scalarToString(const String& v) { return "\"" + v + "\""; }
 std::string scalarToString(const DateTime& v) { return v.toIso8601(); }
 std::string scalarToString(const Guid& v) { return v.toString(); }
-std::string scalarToString(const ByteString& v) { return "0x" + [&] {
-    std::string h;
-    static const char* d = "0123456789abcdef";
-    for (Byte b : std::string_view(v.bytes)) {
-        h += d[b >> 4];
-        h += d[b & 15];
-    }
-    return h;
-}(); }
+std::string scalarToString(const ByteString& v) {
+    return "0x" + [&] {
+        std::string h;
+        static const char* d = "0123456789abcdef";
+        for (Byte b : std::string_view(v.bytes)) {
+            h += d[b >> 4];
+            h += d[b & 15];
+        }
+        return h;
+    }();
+}
 std::string scalarToString(const XmlElement& v) { return v.xml; }
 std::string scalarToString(const NodeId& v) { return v.toString(); }
 std::string scalarToString(const ExpandedNodeId& v) { return v.toString(); }

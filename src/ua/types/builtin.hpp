@@ -112,7 +112,7 @@ struct XmlElement {
 enum class IdType : Byte { Numeric = 0, String = 1, Guid = 2, Opaque = 3 };
 
 class NodeId {
-public:
+  public:
     NodeId() = default;
     constexpr NodeId(UInt16 ns, UInt32 id) : ns_(ns), id_(id) {}
     NodeId(UInt16 ns, std::string s) : ns_(ns), id_(std::move(s)) {}
@@ -138,7 +138,7 @@ public:
     bool operator==(const NodeId&) const = default;
     auto operator<=>(const NodeId&) const = default;
 
-private:
+  private:
     UInt16 ns_ = 0;
     std::variant<UInt32, std::string, Guid, ByteString> id_{UInt32{0}};
 };
@@ -190,7 +190,7 @@ struct ExtensionObject {
 // DiagnosticInfo in DiagnosticInfo) keep value semantics.
 template <class T>
 class Box {
-public:
+  public:
     Box() : p_(std::make_unique<T>()) {}
     Box(T v) : p_(std::make_unique<T>(std::move(v))) {}  // NOLINT
     Box(const Box& o) : p_(std::make_unique<T>(*o.p_)) {}
@@ -206,7 +206,7 @@ public:
     const T* operator->() const { return p_.get(); }
     bool operator==(const Box& o) const { return *p_ == *o.p_; }
 
-private:
+  private:
     std::unique_ptr<T> p_;
 };
 
@@ -231,27 +231,28 @@ struct NoScalarVariant {
     bool operator==(const NoScalarVariant&) const = default;
 };
 // Index i (1..25) holds a scalar of built-in type i, index 25 + i an array of type i.
-using VariantStorage = std::variant<
-    std::monostate, Boolean, SByte, Byte, Int16, UInt16, Int32, UInt32, Int64, UInt64, Float,
-    Double, String, DateTime, Guid, ByteString, XmlElement, NodeId, ExpandedNodeId, StatusCode,
-    QualifiedName, LocalizedText, ExtensionObject, Box<DataValue>, NoScalarVariant,
-    Box<DiagnosticInfo>, std::vector<Boolean>, std::vector<SByte>, std::vector<Byte>,
-    std::vector<Int16>, std::vector<UInt16>, std::vector<Int32>, std::vector<UInt32>,
-    std::vector<Int64>, std::vector<UInt64>, std::vector<Float>, std::vector<Double>,
-    std::vector<String>, std::vector<DateTime>, std::vector<Guid>, std::vector<ByteString>,
-    std::vector<XmlElement>, std::vector<NodeId>, std::vector<ExpandedNodeId>,
-    std::vector<StatusCode>, std::vector<QualifiedName>, std::vector<LocalizedText>,
-    std::vector<ExtensionObject>, std::vector<DataValue>, std::vector<Variant>,
-    std::vector<DiagnosticInfo>>;
+using VariantStorage =
+    std::variant<std::monostate, Boolean, SByte, Byte, Int16, UInt16, Int32, UInt32, Int64, UInt64,
+                 Float, Double, String, DateTime, Guid, ByteString, XmlElement, NodeId,
+                 ExpandedNodeId, StatusCode, QualifiedName, LocalizedText, ExtensionObject,
+                 Box<DataValue>, NoScalarVariant, Box<DiagnosticInfo>, std::vector<Boolean>,
+                 std::vector<SByte>, std::vector<Byte>, std::vector<Int16>, std::vector<UInt16>,
+                 std::vector<Int32>, std::vector<UInt32>, std::vector<Int64>, std::vector<UInt64>,
+                 std::vector<Float>, std::vector<Double>, std::vector<String>,
+                 std::vector<DateTime>, std::vector<Guid>, std::vector<ByteString>,
+                 std::vector<XmlElement>, std::vector<NodeId>, std::vector<ExpandedNodeId>,
+                 std::vector<StatusCode>, std::vector<QualifiedName>, std::vector<LocalizedText>,
+                 std::vector<ExtensionObject>, std::vector<DataValue>, std::vector<Variant>,
+                 std::vector<DiagnosticInfo>>;
 }  // namespace detail
 
 // The C++ type that holds a scalar of a built-in type in a Variant.
 template <class T>
 struct BuiltinTypeOf;
-#define PNP_UA_BUILTIN_OF(T, id)                                  \
-    template <>                                                   \
-    struct BuiltinTypeOf<T> {                                     \
-        static constexpr BuiltinType value = BuiltinType::id;     \
+#define PNP_UA_BUILTIN_OF(T, id)                              \
+    template <>                                               \
+    struct BuiltinTypeOf<T> {                                 \
+        static constexpr BuiltinType value = BuiltinType::id; \
     }
 PNP_UA_BUILTIN_OF(Boolean, Boolean);
 PNP_UA_BUILTIN_OF(SByte, SByte);
@@ -282,7 +283,7 @@ PNP_UA_BUILTIN_OF(DiagnosticInfo, DiagnosticInfo);
 
 // A scalar, a one-dimensional array or a matrix (array + dimensions) of one built-in type.
 class Variant {
-public:
+  public:
     Variant() = default;
     Variant(const char* s) : data_(String(s)) {}  // NOLINT
     template <class T, class = decltype(BuiltinTypeOf<std::decay_t<T>>::value),
@@ -336,7 +337,7 @@ public:
     bool operator==(const Variant& o) const;
     std::string toString() const;  // human-readable, for logs and the CLI
 
-private:
+  private:
     template <class T>
     using Slot = std::conditional_t<
         std::is_same_v<T, DataValue>, Box<DataValue>,

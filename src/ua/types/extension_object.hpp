@@ -32,8 +32,8 @@ std::optional<T> fromExtensionObject(const ExtensionObject& x, const DecodeLimit
     if (x.encoding != ExtensionObject::Encoding::Binary ||
         x.typeId != NodeId(0, DataTypeInfo<T>::binaryEncodingId))
         return std::nullopt;
-    return decodeFromBuffer<T>(reinterpret_cast<const Byte*>(x.body.data()), x.body.size(),
-                               false, limits);
+    return decodeFromBuffer<T>(reinterpret_cast<const Byte*>(x.body.data()), x.body.size(), false,
+                               limits);
 }
 
 }  // namespace pnp::ua

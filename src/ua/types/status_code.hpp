@@ -13,7 +13,8 @@ struct StatusCode {
     std::uint32_t value = 0;
 
     constexpr StatusCode() = default;
-    constexpr StatusCode(std::uint32_t v) : value(v) {}  // NOLINT: codes are plain numbers on the wire
+    constexpr StatusCode(std::uint32_t v)
+        : value(v) {}  // NOLINT: codes are plain numbers on the wire
 
     constexpr bool isGood() const { return (value & 0xC0000000u) == 0; }
     constexpr bool isUncertain() const { return (value & 0xC0000000u) == 0x40000000u; }

@@ -47,10 +47,11 @@ TEST(Namespace0, LoadsEveryNodeOfTheNodeSet) {
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     const auto nodes = xmlNodes();
     const auto stats = space.statistics();
-    std::printf("[ns0] %zu nodes (NodeSet2 file: %zu), %zu references, decoded in %.2f ms "
-                "(constructor %.2f ms), model %.1f KiB\n",
-                stats.nodes, nodes.size(), stats.references, stats.namespaceZeroLoadMs, ms,
-                stats.bytesUsed / 1024.0);
+    std::printf(
+        "[ns0] %zu nodes (NodeSet2 file: %zu), %zu references, decoded in %.2f ms "
+        "(constructor %.2f ms), model %.1f KiB\n",
+        stats.nodes, nodes.size(), stats.references, stats.namespaceZeroLoadMs, ms,
+        stats.bytesUsed / 1024.0);
     EXPECT_EQ(stats.nodes, nodes.size());
     EXPECT_GT(nodes.size(), 5000u);
     EXPECT_LT(stats.namespaceZeroLoadMs, 50.0);
@@ -67,13 +68,12 @@ TEST(Namespace0, ReferencesAreBrowsableInBothDirections) {
     // The NodeSet lists Objects -Organizes-> Server only on the Server node (inverse).
     auto fwd = space.browse(browseDesc(ns0(ns0::ObjectsFolder)), 0, points);
     EXPECT_TRUE(hasTarget(fwd, ns0(ns0::Server)));
-    auto inv =
-        space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Inverse), 0, points);
+    auto inv = space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Inverse), 0, points);
     EXPECT_TRUE(hasTarget(inv, ns0(ns0::ObjectsFolder)));
     // HasSubtype: BaseObjectType -> FolderType and back.
-    auto sub = space.browse(browseDesc(ns0(ns0::BaseObjectType), BrowseDirection::Forward,
-                                       ns0(ns0::HasSubtype)),
-                            0, points);
+    auto sub = space.browse(
+        browseDesc(ns0(ns0::BaseObjectType), BrowseDirection::Forward, ns0(ns0::HasSubtype)), 0,
+        points);
     EXPECT_TRUE(hasTarget(sub, ns0(ns0::FolderType)));
     auto super = space.browse(
         browseDesc(ns0(ns0::FolderType), BrowseDirection::Inverse, ns0(ns0::HasSubtype)), 0,
@@ -85,8 +85,8 @@ TEST(Namespace0, ReferencesAreBrowsableInBothDirections) {
 TEST(Namespace0, NoReferenceIsListedTwice) {
     AddressSpace space;
     ContinuationPointStore points;
-    auto r = space.browse(browseDesc(ns0(ns0::Server_ServerStatus), BrowseDirection::Both), 0,
-                          points);
+    auto r =
+        space.browse(browseDesc(ns0(ns0::Server_ServerStatus), BrowseDirection::Both), 0, points);
     ASSERT_TRUE(r.statusCode.isGood());
     for (std::size_t i = 0; i < r.references.size(); ++i)
         for (std::size_t j = i + 1; j < r.references.size(); ++j)
@@ -153,7 +153,8 @@ TEST_F(AppApi, AddObjectPicksReferenceTypeAndTypeDefinition) {
         }
     }
     EXPECT_TRUE(hasTarget(r2, arm));
-    auto path = std::vector<QualifiedName>{{0, "Objects"}, name("Cell"), name("Robot"), name("Arm")};
+    auto path =
+        std::vector<QualifiedName>{{0, "Objects"}, name("Cell"), name("Robot"), name("Arm")};
     EXPECT_EQ(space.resolvePath(ns0(ns0::RootFolder), path), std::optional<NodeId>(arm));
 }
 
@@ -206,8 +207,8 @@ TEST_F(AppApi, DeleteNodeRemovesReferencesAndChildren) {
     const auto before = space.statistics();
     space.deleteNode(obj);
     EXPECT_FALSE(space.contains(obj));
-    EXPECT_FALSE(space.contains(prop));   // aggregated child
-    EXPECT_FALSE(space.contains(var));    // aggregated child (also organized by Objects)
+    EXPECT_FALSE(space.contains(prop));  // aggregated child
+    EXPECT_FALSE(space.contains(var));   // aggregated child (also organized by Objects)
     ContinuationPointStore points;
     auto r = space.browse(browseDesc(ns0(ns0::ObjectsFolder)), 0, points);
     EXPECT_FALSE(hasTarget(r, obj));
@@ -243,8 +244,8 @@ TEST_F(AppApi, AddAndDeleteReferences) {
     // Inverse form: b <-HasNotifier- a written from b's side.
     space.addReference(b, ns0(ns0::HasNotifier), a, false);
     ContinuationPointStore points;
-    auto r = space.browse(browseDesc(a, BrowseDirection::Forward, ns0(ns0::HasEventSource)), 0,
-                          points);
+    auto r =
+        space.browse(browseDesc(a, BrowseDirection::Forward, ns0(ns0::HasEventSource)), 0, points);
     EXPECT_TRUE(hasTarget(r, b));  // HasNotifier is a subtype of HasEventSource
     EXPECT_EQ(r.references.size(), 2u);
     // A reference to a node of another server.
@@ -265,23 +266,24 @@ TEST_F(AppApi, CustomTypesAndSubtypeClosure) {
     NodeId rt = space.addReferenceType(ns0(ns0::HasComponent), id("HasTool"), name("HasTool"),
                                        {{}, false, false, LocalizedText("", "ToolOf")});
     NodeId ot = space.addObjectType(ns0(ns0::BaseObjectType), id("RobotType"), name("RobotType"));
-    NodeId robot =
-        space.addObject(ns0(ns0::ObjectsFolder), id("R1"), name("R1"), {}, ot);
-    NodeId tool = space.addObject(robot, id("R1.Tool"), name("Tool"), {}, ns0(ns0::BaseObjectType), rt);
+    NodeId robot = space.addObject(ns0(ns0::ObjectsFolder), id("R1"), name("R1"), {}, ot);
+    NodeId tool =
+        space.addObject(robot, id("R1.Tool"), name("Tool"), {}, ns0(ns0::BaseObjectType), rt);
     EXPECT_TRUE(space.isSubtypeOf(rt, ns0(ns0::HierarchicalReferences)));
     ContinuationPointStore points;
     // Browsing for HierarchicalReferences with subtypes finds the new reference type.
-    auto r = space.browse(browseDesc(robot, BrowseDirection::Forward,
-                                     ns0(ns0::HierarchicalReferences), true),
-                          0, points);
+    auto r = space.browse(
+        browseDesc(robot, BrowseDirection::Forward, ns0(ns0::HierarchicalReferences), true), 0,
+        points);
     EXPECT_TRUE(hasTarget(r, tool));
     auto nosub = space.browse(
         browseDesc(robot, BrowseDirection::Forward, ns0(ns0::HasComponent), false), 0, points);
     EXPECT_FALSE(hasTarget(nosub, tool));
-    EXPECT_EQ(space.readAttribute(rt, AttributeId::InverseName).value->scalar<LocalizedText>()->text,
-              "ToolOf");
-    NodeId vt = space.addVariableType(ns0(ns0::BaseDataVariableType), id("TempType"),
-                                      name("TempType"));
+    EXPECT_EQ(
+        space.readAttribute(rt, AttributeId::InverseName).value->scalar<LocalizedText>()->text,
+        "ToolOf");
+    NodeId vt =
+        space.addVariableType(ns0(ns0::BaseDataVariableType), id("TempType"), name("TempType"));
     NodeId dt = space.addDataType(ns0(ns0::Structure), id("MyStruct"), name("MyStruct"));
     EXPECT_EQ(space.nodeClass(vt), std::optional<NodeClass>(NodeClass::VariableType));
     EXPECT_EQ(space.nodeClass(dt), std::optional<NodeClass>(NodeClass::DataType));
@@ -296,7 +298,8 @@ TEST_F(AppApi, ConcurrentReadersAndWriter) {
     NodeId v = addVar("Counter", ns0::Int32, Variant(Int32{0}));
     std::atomic<bool> stop{false};
     std::thread writer([&] {
-        for (Int32 i = 1; i <= 2000; ++i) ASSERT_TRUE(space.setValue(v, DataValue(Variant(i))).isGood());
+        for (Int32 i = 1; i <= 2000; ++i)
+            ASSERT_TRUE(space.setValue(v, DataValue(Variant(i))).isGood());
         stop = true;
     });
     Int32 last = 0;
@@ -323,6 +326,172 @@ TEST_F(AppApi, RegisterNodesIsIdentity) {
     UnregisterNodesRequest ureq;
     ureq.nodesToUnregister = req.nodesToRegister;
     EXPECT_TRUE(space.unregisterNodes(ureq).responseHeader.serviceResult.isGood());
+}
+
+}  // namespace
+}  // namespace pnp::ua::server::test
+
+namespace pnp::ua::server::test {
+namespace {
+
+// Not a benchmark (see bench/), just a visible order of magnitude for the hot paths.
+TEST(Performance, ServicesAreCheap) {
+    AddressSpace space;
+    UInt16 ns = space.addNamespace("urn:perf");
+    VariableAttributes va;
+    va.dataType = NodeId(0, ns0::Double);
+    va.accessLevel = access_level::CurrentRead | access_level::CurrentWrite;
+    va.value = DataValue(Variant(1.0));
+    NodeId v = space.addVariable(NodeId(0, ns0::ObjectsFolder), NodeId(ns, "v"),
+                                 QualifiedName{ns, "v"}, va);
+    auto time = [](int n, auto&& f) {
+        auto t0 = std::chrono::steady_clock::now();
+        for (int i = 0; i < n; ++i) f(i);
+        return std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0)
+                   .count() /
+               n;
+    };
+    ReadRequest read;
+    read.timestampsToReturn = TimestampsToReturn::Both;
+    read.nodesToRead.push_back(readId(v, AttributeId::Value));
+    double readNs = time(20000, [&](int) { ASSERT_EQ(space.read(read).results.size(), 1u); });
+    WriteRequest write;
+    write.nodesToWrite.push_back(writeValue(v, Variant(2.0)));
+    double writeNs = time(20000, [&](int i) {
+        write.nodesToWrite[0].value = DataValue(Variant(double(i)));
+        ASSERT_TRUE(space.write(write).results[0].isGood());
+    });
+    ContinuationPointStore points;
+    BrowseRequest browse;
+    browse.nodesToBrowse.push_back(browseDesc(NodeId(0, ns0::Server), BrowseDirection::Both));
+    std::size_t refs = 0;
+    double browseNs =
+        time(5000, [&](int) { refs = space.browse(browse, points).results[0].references.size(); });
+    TranslateBrowsePathsToNodeIdsRequest tr;
+    BrowsePath p;
+    p.startingNode = NodeId(0, ns0::RootFolder);
+    for (const char* n : {"Objects", "Server", "ServerStatus", "State"}) {
+        RelativePathElement e;
+        e.referenceTypeId = NodeId(0, ns0::HierarchicalReferences);
+        e.includeSubtypes = true;
+        e.targetName = QualifiedName{0, n};
+        p.relativePath.elements.push_back(e);
+    }
+    tr.browsePaths.push_back(p);
+    double translateNs = time(20000, [&](int) {
+        ASSERT_TRUE(space.translateBrowsePaths(tr).results[0].statusCode.isGood());
+    });
+    std::printf(
+        "[perf] read 1 value %.0f ns, write 1 value %.0f ns, browse Server (%zu refs) "
+        "%.0f ns, translate 4-element path %.0f ns\n",
+        readNs, writeNs, refs, browseNs, translateNs);
+}
+
+}  // namespace
+}  // namespace pnp::ua::server::test
+
+namespace pnp::ua::server::test {
+namespace {
+
+using Instantiation = AddressSpaceFixture;
+
+TEST_F(Instantiation, NamespaceZeroObjectType) {
+    NodeId srv = space.addObject(ns0(ns0::ObjectsFolder), id("MyServer"), name("MyServer"), {},
+                                 ns0(ns0::ServerType));
+    auto path = [&](std::vector<QualifiedName> p) { return space.resolvePath(srv, p); };
+    // ServerType -> ServerStatus (ServerStatusType) -> BuildInfo (BuildInfoType) -> ProductName.
+    auto product = path({{0, "ServerStatus"}, {0, "BuildInfo"}, {0, "ProductName"}});
+    ASSERT_TRUE(product.has_value());
+    EXPECT_EQ(*product, id("MyServer.ServerStatus.BuildInfo.ProductName"));
+    auto current = path({{0, "ServerStatus"}, {0, "CurrentTime"}});
+    ASSERT_TRUE(current.has_value());
+    EXPECT_EQ(*space.readAttribute(*current, AttributeId::DataType).value->scalar<NodeId>(),
+              ns0(ns0::UtcTime));
+    EXPECT_TRUE(path({{0, "NamespaceArray"}}).has_value());
+    EXPECT_TRUE(path({{0, "ServerCapabilities"}, {0, "MaxBrowseContinuationPoints"}}).has_value());
+    // Copies carry their type definitions and modelling-rule-free instance references.
+    ContinuationPointStore points;
+    auto r = space.browse(browseDesc(*path({{0, "ServerStatus"}})), 0, points);
+    EXPECT_TRUE(hasTarget(r, ns0(ns0::ServerStatusType)));
+    EXPECT_FALSE(hasTarget(r, ns0(ns0::ModellingRule_Mandatory)));
+    // Optional children are not created.
+    EXPECT_FALSE(path({{0, "ServerRedundancy"}, {0, "RedundantServerArray"}}).has_value());
+    // A copied method shares the arguments of its declaration.
+    auto m = path({{0, "GetMonitoredItems"}});
+    if (m) {
+        CallRequest req;
+        CallMethodRequest c;
+        c.objectId = srv;
+        c.methodId = *m;
+        req.methodsToCall.push_back(c);
+        EXPECT_EQ(space.callSync(req).results[0].statusCode, status::BadArgumentsMissing);
+    }
+}
+
+TEST_F(Instantiation, CustomTypesAndMethodHandlers) {
+    const NodeId mandatory = ns0(ns0::ModellingRule_Mandatory);
+    NodeId device = space.addObjectType(ns0(ns0::BaseObjectType), id("DeviceType"), name("DeviceType"));
+    VariableAttributes serial;
+    serial.dataType = ns0(ns0::String);
+    serial.value = DataValue(Variant(String("unknown")));
+    NodeId serialDecl = space.addProperty(device, id("DeviceType.Serial"), name("Serial"), serial);
+    space.addReference(serialDecl, ns0(ns0::HasModellingRule), mandatory);
+    NodeId optional = space.addProperty(device, id("DeviceType.Note"), name("Note"), serial);
+    space.addReference(optional, ns0(ns0::HasModellingRule), ns0(ns0::ModellingRule_Optional));
+    std::vector<NodeId> resetOn;
+    NodeId resetDecl = space.addMethod(device, id("DeviceType.Reset"), name("Reset"),
+                                       {argument("hard", ns0::Boolean)}, {},
+                                       makeMethodHandler([&](const MethodCallContext& c, auto&, auto&) {
+                                           resetOn.push_back(c.objectId);
+                                           return StatusCode{};
+                                       }));
+    space.addReference(resetDecl, ns0(ns0::HasModellingRule), mandatory);
+    NodeId robotType = space.addObjectType(device, id("RobotType"), name("RobotType"));
+    VariableAttributes axes;
+    axes.dataType = ns0(ns0::UInt32);
+    axes.value = DataValue(Variant(UInt32{6}));
+    NodeId axesDecl = space.addVariable(robotType, id("RobotType.Axes"), name("Axes"), axes);
+    space.addReference(axesDecl, ns0(ns0::HasModellingRule), mandatory);
+
+    NodeId robot = space.addObject(ns0(ns0::ObjectsFolder), id("R1"), name("R1"), {}, robotType);
+    EXPECT_TRUE(space.contains(id("R1.Serial")));
+    EXPECT_TRUE(space.contains(id("R1.Axes")));
+    EXPECT_TRUE(space.contains(id("R1.Reset")));
+    EXPECT_TRUE(space.contains(id("R1.Reset.InputArguments")));
+    EXPECT_FALSE(space.contains(id("R1.Note")));
+    EXPECT_EQ(*space.readValue(id("R1.Axes")).value->scalar<UInt32>(), 6u);
+    EXPECT_EQ(*space.readValue(id("R1.Serial")).value->scalar<String>(), "unknown");
+    // Instance values are independent of the declaration's.
+    EXPECT_TRUE(space.setValue(id("R1.Serial"), DataValue(Variant(String("SN-1")))).isGood());
+    EXPECT_EQ(*space.readValue(serialDecl).value->scalar<String>(), "unknown");
+    // The copied method uses the declaration's handler until the instance gets its own.
+    CallRequest req;
+    CallMethodRequest c;
+    c.objectId = robot;
+    c.methodId = id("R1.Reset");
+    c.inputArguments = {Variant(true)};
+    req.methodsToCall.push_back(c);
+    EXPECT_TRUE(space.callSync(req).results[0].statusCode.isGood());
+    EXPECT_EQ(resetOn, std::vector<NodeId>{robot});
+    space.setMethodHandler(id("R1.Reset"), makeMethodHandler([](auto&, auto&, auto&) {
+                               return status::BadInvalidState;
+                           }));
+    EXPECT_EQ(space.callSync(req).results[0].statusCode, status::BadInvalidState);
+    // Opting out, and numeric ids.
+    ObjectAttributes bare;
+    bare.instantiateMandatory = false;
+    NodeId r2 = space.addObject(ns0(ns0::ObjectsFolder), id("R2"), name("R2"), bare, robotType);
+    EXPECT_FALSE(space.resolvePath(r2, std::vector<QualifiedName>{name("Serial")}).has_value());
+    NodeId r3 = space.addObject(ns0(ns0::ObjectsFolder), NodeId(ns, UInt32{0}), name("R3"), {},
+                                robotType);
+    auto s3 = space.resolvePath(r3, std::vector<QualifiedName>{name("Serial")});
+    ASSERT_TRUE(s3.has_value());
+    EXPECT_TRUE(s3->isNumeric());
+    EXPECT_EQ(s3->namespaceIndex(), ns);
+    // Deleting an instance deletes its copies.
+    space.deleteNode(robot);
+    EXPECT_FALSE(space.contains(id("R1.Reset.InputArguments")));
+    EXPECT_TRUE(space.contains(resetDecl));
 }
 
 }  // namespace

@@ -41,7 +41,8 @@ TEST_F(Browse, InverseAndBoth) {
     auto both = space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Both), 0, points);
     EXPECT_EQ(both.references.size(), fwd.references.size() + inv.references.size());
     // A null referenceTypeId means all references.
-    auto all = space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Both, NodeId()), 0, points);
+    auto all =
+        space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Both, NodeId()), 0, points);
     EXPECT_EQ(all.references.size(), both.references.size());
 }
 
@@ -71,9 +72,9 @@ TEST_F(Browse, ReferenceTypeSubtypes) {
         EXPECT_EQ(ref.nodeClass, NodeClass::Variable);
         EXPECT_EQ(ref.typeDefinition.nodeId, ns0(ns0::PropertyType));
     }
-    auto typeDef = space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward,
-                                           ns0(ns0::HasTypeDefinition)),
-                                0, points);
+    auto typeDef = space.browse(
+        browseDesc(ns0(ns0::Server), BrowseDirection::Forward, ns0(ns0::HasTypeDefinition)), 0,
+        points);
     ASSERT_EQ(typeDef.references.size(), 1u);
     EXPECT_EQ(typeDef.references[0].nodeClass, NodeClass::ObjectType);
     EXPECT_TRUE(typeDef.references[0].typeDefinition.nodeId.isNull());  // only Objects/Variables
@@ -81,16 +82,16 @@ TEST_F(Browse, ReferenceTypeSubtypes) {
 
 TEST_F(Browse, NodeClassMask) {
     ContinuationPointStore points;
-    auto vars = space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward,
-                                        ns0(ns0::References), true,
-                                        static_cast<UInt32>(NodeClass::Variable)),
-                             0, points);
+    auto vars =
+        space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward, ns0(ns0::References),
+                                true, static_cast<UInt32>(NodeClass::Variable)),
+                     0, points);
     ASSERT_FALSE(vars.references.empty());
     for (const auto& ref : vars.references) EXPECT_EQ(ref.nodeClass, NodeClass::Variable);
-    auto methods = space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward,
-                                           ns0(ns0::References), true,
-                                           static_cast<UInt32>(NodeClass::Method)),
-                                0, points);
+    auto methods =
+        space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward, ns0(ns0::References),
+                                true, static_cast<UInt32>(NodeClass::Method)),
+                     0, points);
     EXPECT_TRUE(hasTarget(methods, ns0(ns0::Server_GetMonitoredItems)));
     for (const auto& ref : methods.references) EXPECT_EQ(ref.nodeClass, NodeClass::Method);
     auto mixed = space.browse(
@@ -131,15 +132,16 @@ TEST_F(Browse, ResultMask) {
 TEST_F(Browse, Errors) {
     ContinuationPointStore points;
     EXPECT_EQ(space.browse(browseDesc(id("nope")), 0, points).statusCode, status::BadNodeIdUnknown);
-    EXPECT_EQ(space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward,
-                                      ns0(ns0::ObjectsFolder)),
-                           0, points)
-                  .statusCode,
-              status::BadReferenceTypeIdInvalid);
-    EXPECT_EQ(space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward, id("nope")), 0,
-                           points)
-                  .statusCode,
-              status::BadReferenceTypeIdInvalid);
+    EXPECT_EQ(
+        space
+            .browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward, ns0(ns0::ObjectsFolder)),
+                    0, points)
+            .statusCode,
+        status::BadReferenceTypeIdInvalid);
+    EXPECT_EQ(
+        space.browse(browseDesc(ns0(ns0::Server), BrowseDirection::Forward, id("nope")), 0, points)
+            .statusCode,
+        status::BadReferenceTypeIdInvalid);
     EXPECT_EQ(space.browse(browseDesc(ns0(ns0::Server), static_cast<BrowseDirection>(3)), 0, points)
                   .statusCode,
               status::BadBrowseDirectionInvalid);
@@ -278,19 +280,18 @@ using Translate = AddressSpaceFixture;
 
 TEST_F(Translate, ObjectsServerServerStatusState) {
     auto r = space.translateBrowsePath(
-        path(ns0(ns0::RootFolder), {element("Objects"), element("Server"),
-                                    element("ServerStatus"), element("State")}));
+        path(ns0(ns0::RootFolder),
+             {element("Objects"), element("Server"), element("ServerStatus"), element("State")}));
     ASSERT_TRUE(r.statusCode.isGood()) << r.statusCode.toString();
     ASSERT_EQ(r.targets.size(), 1u);
     EXPECT_EQ(r.targets[0].targetId.nodeId, ns0(ns0::Server_ServerStatus_State));
     EXPECT_EQ(r.targets[0].remainingPathIndex, 0xFFFFFFFFu);
     // With exact reference types: Organizes, Organizes, HasComponent, HasComponent.
     auto exact = space.translateBrowsePath(
-        path(ns0(ns0::RootFolder),
-             {element("Objects", ns0::Organizes, false, false),
-              element("Server", ns0::Organizes, false, false),
-              element("ServerStatus", ns0::HasComponent, false, false),
-              element("State", ns0::HasComponent, false, false)}));
+        path(ns0(ns0::RootFolder), {element("Objects", ns0::Organizes, false, false),
+                                    element("Server", ns0::Organizes, false, false),
+                                    element("ServerStatus", ns0::HasComponent, false, false),
+                                    element("State", ns0::HasComponent, false, false)}));
     ASSERT_TRUE(exact.statusCode.isGood());
     EXPECT_EQ(exact.targets[0].targetId.nodeId, ns0(ns0::Server_ServerStatus_State));
     // Aggregates ('.' in the text syntax) finds properties.
@@ -301,19 +302,19 @@ TEST_F(Translate, ObjectsServerServerStatusState) {
 }
 
 TEST_F(Translate, InverseAndMultipleTargets) {
-    auto up = space.translateBrowsePath(path(ns0(ns0::Server_ServerStatus_State),
-                                             {element("ServerStatus", ns0::HasComponent, true),
-                                              element("Server", ns0::HasComponent, true)}));
+    auto up = space.translateBrowsePath(
+        path(ns0(ns0::Server_ServerStatus_State), {element("ServerStatus", ns0::HasComponent, true),
+                                                   element("Server", ns0::HasComponent, true)}));
     ASSERT_TRUE(up.statusCode.isGood());
     EXPECT_EQ(up.targets[0].targetId.nodeId, ns0(ns0::Server));
     // Two children with one BrowseName.
     NodeId a = space.addObject(ns0(ns0::ObjectsFolder), id("A"), name("A"));
     NodeId x1 = space.addObject(a, id("X1"), name("X"));
-    NodeId x2 = space.addObject(a, id("X2"), name("X"), {}, ns0(ns0::BaseObjectType),
-                                ns0(ns0::Organizes));
-    auto r = space.translateBrowsePath(
-        path(ns0(ns0::ObjectsFolder), {element("A", ns0::HierarchicalReferences, false, true, ns),
-                                       element("X", ns0::HierarchicalReferences, false, true, ns)}));
+    NodeId x2 =
+        space.addObject(a, id("X2"), name("X"), {}, ns0(ns0::BaseObjectType), ns0(ns0::Organizes));
+    auto r = space.translateBrowsePath(path(
+        ns0(ns0::ObjectsFolder), {element("A", ns0::HierarchicalReferences, false, true, ns),
+                                  element("X", ns0::HierarchicalReferences, false, true, ns)}));
     ASSERT_TRUE(r.statusCode.isGood());
     ASSERT_EQ(r.targets.size(), 2u);
     EXPECT_TRUE((r.targets[0].targetId.nodeId == x1 && r.targets[1].targetId.nodeId == x2) ||
@@ -326,19 +327,23 @@ TEST_F(Translate, Errors) {
     EXPECT_EQ(noMatch.statusCode, status::BadNoMatch);
     EXPECT_TRUE(noMatch.targets.empty());
     // Namespace of the BrowseName matters.
-    EXPECT_EQ(space.translateBrowsePath(path(ns0(ns0::RootFolder), {element("Objects", ns0::Organizes, false, true, 1)}))
+    EXPECT_EQ(space
+                  .translateBrowsePath(path(ns0(ns0::RootFolder),
+                                            {element("Objects", ns0::Organizes, false, true, 1)}))
                   .statusCode,
               status::BadNoMatch);
     // Wrong reference type.
-    EXPECT_EQ(space.translateBrowsePath(
-                      path(ns0(ns0::RootFolder), {element("Objects", ns0::HasComponent, false, true)}))
+    EXPECT_EQ(space
+                  .translateBrowsePath(path(ns0(ns0::RootFolder),
+                                            {element("Objects", ns0::HasComponent, false, true)}))
                   .statusCode,
               status::BadNoMatch);
     EXPECT_EQ(space.translateBrowsePath(path(ns0(ns0::RootFolder), {element("")})).statusCode,
               status::BadBrowseNameInvalid);
-    EXPECT_EQ(space.translateBrowsePath(path(ns0(ns0::RootFolder), {element(""), element("Server")}))
-                  .statusCode,
-              status::BadBrowseNameInvalid);
+    EXPECT_EQ(
+        space.translateBrowsePath(path(ns0(ns0::RootFolder), {element(""), element("Server")}))
+            .statusCode,
+        status::BadBrowseNameInvalid);
     EXPECT_EQ(space.translateBrowsePath(path(ns0(ns0::RootFolder), {})).statusCode,
               status::BadNothingToDo);
     EXPECT_EQ(space.translateBrowsePath(path(id("nope"), {element("Objects")})).statusCode,

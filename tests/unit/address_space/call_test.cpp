@@ -16,8 +16,8 @@ struct Call : AddressSpaceFixture {
     void SetUp() override {
         calc = space.addObject(ns0(ns0::ObjectsFolder), id("Calc"), name("Calc"));
         add = space.addMethod(
-            calc, id("Calc.Add"), name("Add"), {argument("a", ns0::Int32), argument("b", ns0::Int32)},
-            {argument("sum", ns0::Int32)},
+            calc, id("Calc.Add"), name("Add"),
+            {argument("a", ns0::Int32), argument("b", ns0::Int32)}, {argument("sum", ns0::Int32)},
             makeMethodHandler([](const MethodCallContext&, const std::vector<Variant>& in,
                                  std::vector<Variant>& out) {
                 out.push_back(Variant(*in[0].scalar<Int32>() + *in[1].scalar<Int32>()));
@@ -53,7 +53,8 @@ TEST_F(Call, MethodNodeAndArgumentProperties) {
     EXPECT_EQ(fromExtensionObject<Argument>((*objs)[1])->name, "b");
     EXPECT_EQ(*space.readAttribute(*in, AttributeId::ArrayDimensions).value->array<UInt32>(),
               std::vector<UInt32>{2});
-    EXPECT_TRUE(space.resolvePath(add, std::vector<QualifiedName>{{0, "OutputArguments"}}).has_value());
+    EXPECT_TRUE(
+        space.resolvePath(add, std::vector<QualifiedName>{{0, "OutputArguments"}}).has_value());
 }
 
 TEST_F(Call, SynchronousHandler) {
@@ -84,22 +85,23 @@ TEST_F(Call, ArgumentChecks) {
 }
 
 TEST_F(Call, ArgumentSubtypesAndRanks) {
-    NodeId m = space.addMethod(
-        calc, id("Calc.Mixed"), name("Mixed"),
-        {argument("n", ns0::Number), argument("t", ns0::UtcTime),
-         argument("list", ns0::String, 1, {2}), argument("any", ns0::BaseDataType, -2),
-         argument("arg", ns0::Argument)},
-        {}, makeMethodHandler([](const MethodCallContext&, const std::vector<Variant>&,
-                                 std::vector<Variant>&) { return StatusCode{}; }));
-    auto ok = callOne(request(calc, m,
-                              {Variant(1.5), Variant(DateTime::now()),
-                               Variant(std::vector<String>{"a", "b"}), Variant(),
-                               Variant(toExtensionObject(argument("x", ns0::Int32)))}));
+    NodeId m =
+        space.addMethod(calc, id("Calc.Mixed"), name("Mixed"),
+                        {argument("n", ns0::Number), argument("t", ns0::UtcTime),
+                         argument("list", ns0::String, 1, {2}),
+                         argument("any", ns0::BaseDataType, -2), argument("arg", ns0::Argument)},
+                        {},
+                        makeMethodHandler([](const MethodCallContext&, const std::vector<Variant>&,
+                                             std::vector<Variant>&) { return StatusCode{}; }));
+    auto ok = callOne(
+        request(calc, m,
+                {Variant(1.5), Variant(DateTime::now()), Variant(std::vector<String>{"a", "b"}),
+                 Variant(), Variant(toExtensionObject(argument("x", ns0::Int32)))}));
     EXPECT_TRUE(ok.statusCode.isGood()) << ok.statusCode.toString();
-    auto bad = callOne(request(calc, m,
-                               {Variant(String("1")), Variant(Int64{0}),
-                                Variant(std::vector<String>{"a", "b", "c"}), Variant(Int32{1}),
-                                Variant(toExtensionObject(EUInformation{}))}));
+    auto bad = callOne(request(
+        calc, m,
+        {Variant(String("1")), Variant(Int64{0}), Variant(std::vector<String>{"a", "b", "c"}),
+         Variant(Int32{1}), Variant(toExtensionObject(EUInformation{}))}));
     EXPECT_EQ(bad.statusCode, status::BadInvalidArgument);
     ASSERT_EQ(bad.inputArgumentResults.size(), 5u);
     EXPECT_EQ(bad.inputArgumentResults[0], status::BadTypeMismatch);
@@ -119,8 +121,8 @@ TEST_F(Call, MethodLookup) {
     NodeId var = addVar("Var", ns0::Int32, Variant(Int32{1}));
     EXPECT_EQ(callOne(request(var, add, {})).statusCode, status::BadNodeIdInvalid);
     // A namespace-0 method without an application handler.
-    auto r = callOne(request(ns0(ns0::Server), ns0(ns0::Server_GetMonitoredItems),
-                             {Variant(UInt32{1})}));
+    auto r = callOne(
+        request(ns0(ns0::Server), ns0(ns0::Server_GetMonitoredItems), {Variant(UInt32{1})}));
     EXPECT_EQ(r.statusCode, status::BadNotImplemented);
     // ...whose arguments are still checked against its InputArguments property.
     EXPECT_EQ(callOne(request(ns0(ns0::Server), ns0(ns0::Server_GetMonitoredItems), {})).statusCode,
@@ -130,16 +132,17 @@ TEST_F(Call, MethodLookup) {
 }
 
 TEST_F(Call, MethodOfTheObjectType) {
-    NodeId type = space.addObjectType(ns0(ns0::BaseObjectType), id("DeviceType"), name("DeviceType"));
+    NodeId type =
+        space.addObjectType(ns0(ns0::BaseObjectType), id("DeviceType"), name("DeviceType"));
     NodeId sub = space.addObjectType(type, id("RobotType"), name("RobotType"));
     std::vector<NodeId> calledOn;
-    NodeId reset = space.addMethod(type, id("DeviceType.Reset"), name("Reset"), {}, {},
-                                   makeMethodHandler([&](const MethodCallContext& c,
-                                                         const std::vector<Variant>&,
-                                                         std::vector<Variant>&) {
-                                       calledOn.push_back(c.objectId);
-                                       return StatusCode{};
-                                   }));
+    NodeId reset =
+        space.addMethod(type, id("DeviceType.Reset"), name("Reset"), {}, {},
+                        makeMethodHandler([&](const MethodCallContext& c,
+                                              const std::vector<Variant>&, std::vector<Variant>&) {
+                            calledOn.push_back(c.objectId);
+                            return StatusCode{};
+                        }));
     NodeId robot = space.addObject(ns0(ns0::ObjectsFolder), id("Robot"), name("Robot"), {}, sub);
     EXPECT_TRUE(callOne(request(robot, reset, {})).statusCode.isGood());
     EXPECT_TRUE(callOne(request(sub, reset, {})).statusCode.isGood());   // on a subtype
@@ -151,9 +154,9 @@ TEST_F(Call, MethodOfTheObjectType) {
 TEST_F(Call, ExecutableAndFailures) {
     MethodAttributes ma;
     ma.executable = false;
-    NodeId off = space.addMethod(calc, id("Calc.Off"), name("Off"), {}, {},
-                                 makeMethodHandler([](auto&, auto&, auto&) { return StatusCode{}; }),
-                                 ma);
+    NodeId off =
+        space.addMethod(calc, id("Calc.Off"), name("Off"), {}, {},
+                        makeMethodHandler([](auto&, auto&, auto&) { return StatusCode{}; }), ma);
     EXPECT_EQ(callOne(request(calc, off, {})).statusCode, status::BadNotExecutable);
     NodeId fails = space.addMethod(calc, id("Calc.Fails"), name("Fails"), {}, {},
                                    makeMethodHandler([](auto&, auto&, auto& out) {
@@ -167,9 +170,9 @@ TEST_F(Call, ExecutableAndFailures) {
                                     [](const MethodCallContext&, std::vector<Variant>,
                                        MethodCompletion) { throw std::runtime_error("boom"); });
     EXPECT_EQ(callOne(request(calc, throws, {})).statusCode, status::BadInternalError);
-    NodeId forgets = space.addMethod(calc, id("Calc.Forgets"), name("Forgets"), {}, {},
-                                     [](const MethodCallContext&, std::vector<Variant>,
-                                        MethodCompletion) {});
+    NodeId forgets =
+        space.addMethod(calc, id("Calc.Forgets"), name("Forgets"), {}, {},
+                        [](const MethodCallContext&, std::vector<Variant>, MethodCompletion) {});
     EXPECT_EQ(callOne(request(calc, forgets, {})).statusCode, status::BadInternalError);
     // Removing the handler.
     space.setMethodHandler(fails, {});

@@ -46,8 +46,8 @@ int main(int argc, char** argv) {
         "namespace 0 decoded in %.2f ms; ready %.2f ms after main()\n"
         "process RSS: %ld KiB before, %ld KiB after (peak %ld KiB)\n"
         "(objects folder: %zu references, namespace array ok: %d)\n",
-        stats.nodes, stats.references, stats.bytesUsed / 1024.0, stats.namespaceZeroLoadMs,
-        readyMs, rssBefore, rss, hwm, browsed.references.size(),
+        stats.nodes, stats.references, stats.bytesUsed / 1024.0, stats.namespaceZeroLoadMs, readyMs,
+        rssBefore, rss, hwm, browsed.references.size(),
         value.value && value.value->isArray() ? 1 : 0);
     if (!check) return 0;
     bool ok = readyMs < 100 && stats.namespaceZeroLoadMs < 50 && hwm <= 8 * 1024;

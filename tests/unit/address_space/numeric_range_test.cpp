@@ -1,7 +1,8 @@
 // NumericRange parsing and application (OPC 10000-4 §7.27).
+#include "ua/server/numeric_range.hpp"
+
 #include <gtest/gtest.h>
 
-#include "ua/server/numeric_range.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::server {
@@ -38,7 +39,8 @@ TEST(NumericRange, ReadArrays) {
     EXPECT_TRUE(readRange(b, *NumericRange::parse("1:2"), out).isGood());
     EXPECT_EQ(*out.array<Boolean>(), (std::vector<Boolean>{false, true}));
     // Arrays of ByteStrings: the last dimension cuts each element.
-    Variant bs(std::vector<ByteString>{ByteString(std::string("abc")), ByteString(std::string("d"))});
+    Variant bs(
+        std::vector<ByteString>{ByteString(std::string("abc")), ByteString(std::string("d"))});
     EXPECT_TRUE(readRange(bs, *NumericRange::parse("0:1,1:2"), out).isGood());
     EXPECT_EQ((*out.array<ByteString>())[0].bytes, "bc");
     EXPECT_EQ((*out.array<ByteString>())[1].bytes, "");  // no data in range for that element

@@ -26,20 +26,20 @@ void expectAttributeSet(const AddressSpace& space, const NodeId& id,
                         std::vector<AttributeId> valid) {
     for (UInt32 a = 0; a <= 28; ++a) {
         DataValue dv = space.readAttribute(id, static_cast<AttributeId>(a));
-        bool expected = std::find(valid.begin(), valid.end(), static_cast<AttributeId>(a)) !=
-                        valid.end();
+        bool expected =
+            std::find(valid.begin(), valid.end(), static_cast<AttributeId>(a)) != valid.end();
         if (expected)
-            EXPECT_TRUE(statusOf(dv).isGood()) << id.toString() << " attribute " << a << ": "
-                                               << statusOf(dv).toString();
+            EXPECT_TRUE(statusOf(dv).isGood())
+                << id.toString() << " attribute " << a << ": " << statusOf(dv).toString();
         else
             EXPECT_EQ(statusOf(dv), status::BadAttributeIdInvalid)
                 << id.toString() << " attribute " << a;
     }
 }
 
-const std::vector<AttributeId> kBase = {AttributeId::NodeId,      AttributeId::NodeClass,
-                                        AttributeId::BrowseName,  AttributeId::DisplayName,
-                                        AttributeId::Description, AttributeId::WriteMask,
+const std::vector<AttributeId> kBase = {AttributeId::NodeId,       AttributeId::NodeClass,
+                                        AttributeId::BrowseName,   AttributeId::DisplayName,
+                                        AttributeId::Description,  AttributeId::WriteMask,
                                         AttributeId::UserWriteMask};
 
 std::vector<AttributeId> with(std::vector<AttributeId> extra) {
@@ -74,7 +74,8 @@ TEST_F(Read, VariableAttributes) {
               0.0);
     EXPECT_FALSE(scalarOf<Boolean>(space.readAttribute(state, AttributeId::Historizing)));
     EXPECT_EQ(scalarOf<UInt32>(space.readAttribute(state, AttributeId::WriteMask)), 0u);
-    auto dims = space.readAttribute(ns0(ns0::ServerState_EnumStrings), AttributeId::ArrayDimensions);
+    auto dims =
+        space.readAttribute(ns0(ns0::ServerState_EnumStrings), AttributeId::ArrayDimensions);
     ASSERT_NE(dims.value->array<UInt32>(), nullptr);
     EXPECT_EQ(*dims.value->array<UInt32>(), std::vector<UInt32>{8});
     // Variables with values from the NodeSet.
@@ -89,8 +90,8 @@ TEST_F(Read, VariableAttributes) {
 
 TEST_F(Read, NamespaceZeroStructureValues) {
     // InputArguments of Server.GetMonitoredItems: one Argument "SubscriptionId" (UInt32).
-    auto args = space.readAttribute(ns0(ns0::Server_GetMonitoredItems_InputArguments),
-                                    AttributeId::Value);
+    auto args =
+        space.readAttribute(ns0(ns0::Server_GetMonitoredItems_InputArguments), AttributeId::Value);
     ASSERT_TRUE(statusOf(args).isGood());
     const auto* objs = args.value->array<ExtensionObject>();
     ASSERT_NE(objs, nullptr);
@@ -164,8 +165,8 @@ TEST_F(Read, EveryNamespaceZeroValueDecodes) {
             checkObject(*dv.value->scalar<ExtensionObject>());
         }
     }
-    std::printf("[ns0] %zu values, %zu ExtensionObjects, %zu DataTypeDefinitions checked\n",
-                values, objects, definitions);
+    std::printf("[ns0] %zu values, %zu ExtensionObjects, %zu DataTypeDefinitions checked\n", values,
+                objects, definitions);
     EXPECT_GT(values, 1200u);
     EXPECT_GT(objects, 1100u);
     EXPECT_GT(definitions, 240u);
@@ -186,9 +187,10 @@ TEST_F(Read, MethodAttributes) {
 
 TEST_F(Read, ObjectTypeAttributes) {
     expectAttributeSet(space, ns0(ns0::ServerType), with({AttributeId::IsAbstract}));
-    EXPECT_FALSE(scalarOf<Boolean>(space.readAttribute(ns0(ns0::ServerType), AttributeId::IsAbstract)));
-    EXPECT_TRUE(scalarOf<Boolean>(
-        space.readAttribute(ns0(ns0::BaseEventType), AttributeId::IsAbstract)));
+    EXPECT_FALSE(
+        scalarOf<Boolean>(space.readAttribute(ns0(ns0::ServerType), AttributeId::IsAbstract)));
+    EXPECT_TRUE(
+        scalarOf<Boolean>(space.readAttribute(ns0(ns0::BaseEventType), AttributeId::IsAbstract)));
 }
 
 TEST_F(Read, VariableTypeAttributes) {
@@ -206,21 +208,22 @@ TEST_F(Read, VariableTypeAttributes) {
 
 TEST_F(Read, ReferenceTypeAttributes) {
     const NodeId org = ns0(ns0::Organizes);
-    expectAttributeSet(space, org,
-                       with({AttributeId::IsAbstract, AttributeId::Symmetric,
-                             AttributeId::InverseName}));
+    expectAttributeSet(
+        space, org,
+        with({AttributeId::IsAbstract, AttributeId::Symmetric, AttributeId::InverseName}));
     EXPECT_EQ(scalarOf<LocalizedText>(space.readAttribute(org, AttributeId::InverseName)).text,
               "OrganizedBy");
     EXPECT_FALSE(scalarOf<Boolean>(space.readAttribute(org, AttributeId::Symmetric)));
-    EXPECT_TRUE(scalarOf<Boolean>(
-        space.readAttribute(ns0(ns0::References), AttributeId::IsAbstract)));
-    EXPECT_TRUE(scalarOf<Boolean>(
-        space.readAttribute(ns0(ns0::References), AttributeId::Symmetric)));
+    EXPECT_TRUE(
+        scalarOf<Boolean>(space.readAttribute(ns0(ns0::References), AttributeId::IsAbstract)));
+    EXPECT_TRUE(
+        scalarOf<Boolean>(space.readAttribute(ns0(ns0::References), AttributeId::Symmetric)));
 }
 
 TEST_F(Read, DataTypeAttributesAndDefinitions) {
     const NodeId arg = ns0(ns0::Argument);
-    expectAttributeSet(space, arg, with({AttributeId::IsAbstract, AttributeId::DataTypeDefinition}));
+    expectAttributeSet(space, arg,
+                       with({AttributeId::IsAbstract, AttributeId::DataTypeDefinition}));
     auto def = space.readAttribute(arg, AttributeId::DataTypeDefinition);
     auto sd = fromExtensionObject<StructureDefinition>(scalarOf<ExtensionObject>(def));
     ASSERT_TRUE(sd.has_value());
@@ -233,8 +236,8 @@ TEST_F(Read, DataTypeAttributesAndDefinitions) {
     EXPECT_EQ(sd->fields[3].name, "ArrayDimensions");
     EXPECT_EQ(sd->fields[3].valueRank, 1);
     // Subtype: the definition starts with the inherited fields.
-    auto ef = fromExtensionObject<StructureDefinition>(
-        scalarOf<ExtensionObject>(space.readAttribute(ns0(ns0::EnumField), AttributeId::DataTypeDefinition)));
+    auto ef = fromExtensionObject<StructureDefinition>(scalarOf<ExtensionObject>(
+        space.readAttribute(ns0(ns0::EnumField), AttributeId::DataTypeDefinition)));
     ASSERT_TRUE(ef.has_value());
     ASSERT_EQ(ef->fields.size(), 4u);
     EXPECT_EQ(ef->fields[0].name, "Value");
@@ -264,7 +267,8 @@ TEST_F(Read, ViewAttributes) {
     va.eventNotifier = 1;
     va.description = LocalizedText("en", "A view");
     NodeId view = space.addView(ns0(ns0::ViewsFolder), id("View"), name("View"), va);
-    expectAttributeSet(space, view, with({AttributeId::ContainsNoLoops, AttributeId::EventNotifier}));
+    expectAttributeSet(space, view,
+                       with({AttributeId::ContainsNoLoops, AttributeId::EventNotifier}));
     EXPECT_TRUE(scalarOf<Boolean>(space.readAttribute(view, AttributeId::ContainsNoLoops)));
     EXPECT_EQ(scalarOf<Byte>(space.readAttribute(view, AttributeId::EventNotifier)), 1);
     EXPECT_EQ(scalarOf<LocalizedText>(space.readAttribute(view, AttributeId::Description)),
@@ -331,12 +335,14 @@ TEST_F(Read, AccessLevelAndEncoding) {
     EXPECT_EQ(enc(i32, AttributeId::Value, binary), status::BadDataEncodingInvalid);
     EXPECT_EQ(enc(i32, AttributeId::DisplayName, binary), status::BadDataEncodingInvalid);
     EXPECT_EQ(enc(ns0(ns0::Server_ServerStatus), AttributeId::Value, binary), StatusCode{});
-    EXPECT_EQ(enc(ns0(ns0::Server_ServerStatus), AttributeId::Value, QualifiedName{0, "Default XML"}),
-              status::BadDataEncodingUnsupported);
+    EXPECT_EQ(
+        enc(ns0(ns0::Server_ServerStatus), AttributeId::Value, QualifiedName{0, "Default XML"}),
+        status::BadDataEncodingUnsupported);
     EXPECT_EQ(enc(ns0(ns0::Server_ServerStatus), AttributeId::Value, QualifiedName{0, "Foo"}),
               status::BadDataEncodingInvalid);
-    EXPECT_EQ(enc(ns0(ns0::Server_ServerStatus), AttributeId::Value, QualifiedName{2, "Default Binary"}),
-              status::BadDataEncodingInvalid);
+    EXPECT_EQ(
+        enc(ns0(ns0::Server_ServerStatus), AttributeId::Value, QualifiedName{2, "Default Binary"}),
+        status::BadDataEncodingInvalid);
 }
 
 TEST_F(Read, IndexRange) {
@@ -365,8 +371,8 @@ TEST_F(Read, IndexRange) {
     NodeId scalar = addVar("Scalar", ns0::Int32, Variant(Int32{5}));
     EXPECT_EQ(statusOf(rd(scalar, "0")), status::BadIndexRangeNoData);
     // Arrays of strings: the second dimension indexes the characters.
-    NodeId strs = addVar("Strs", ns0::String,
-                         Variant(std::vector<String>{"alpha", "beta", "gamma"}), 1);
+    NodeId strs =
+        addVar("Strs", ns0::String, Variant(std::vector<String>{"alpha", "beta", "gamma"}), 1);
     EXPECT_EQ(*rd(strs, "0:1,1:2").value->array<String>(), (std::vector<String>{"lp", "et"}));
     EXPECT_EQ(*rd(strs, "1:2").value->array<String>(), (std::vector<String>{"beta", "gamma"}));
     // Matrix 3x4: "1:2,0:1" is a 2x2 block.
@@ -382,7 +388,8 @@ TEST_F(Read, IndexRange) {
     EXPECT_EQ(statusOf(rd(mat, "1")), status::BadIndexRangeNoData);
     EXPECT_EQ(statusOf(rd(mat, "3,0")), status::BadIndexRangeNoData);
     // Non-Value array attributes take ranges too; scalar attributes do not.
-    auto dims = space.read(readId(ns0(ns0::ServerState_EnumStrings), AttributeId::ArrayDimensions, "0"));
+    auto dims =
+        space.read(readId(ns0(ns0::ServerState_EnumStrings), AttributeId::ArrayDimensions, "0"));
     EXPECT_EQ(*dims.value->array<UInt32>(), std::vector<UInt32>{8});
     EXPECT_EQ(statusOf(space.read(readId(arr, AttributeId::BrowseName, "0"))),
               status::BadIndexRangeNoData);
@@ -402,7 +409,7 @@ TEST_F(Write, TypeChecks) {
     EXPECT_EQ(space.write(writeValue(i32, Variant(42.0))), status::BadTypeMismatch);
     EXPECT_EQ(space.write(writeValue(i32, Variant(Int64{42}))), status::BadTypeMismatch);
     EXPECT_EQ(space.write(writeValue(i32, Variant(std::vector<Int32>{1, 2}))),
-              status::BadTypeMismatch);  // scalar rank
+              status::BadTypeMismatch);                           // scalar rank
     EXPECT_EQ(*space.readValue(i32).value->scalar<Int32>(), 42);  // unchanged
     // Subtypes of built-in types take the built-in type.
     NodeId utc = addVar("Utc", ns0::UtcTime, Variant(DateTime::now()));
@@ -426,12 +433,14 @@ TEST_F(Write, TypeChecks) {
     EXPECT_EQ(space.write(writeValue(st, Variant(UInt32{2}))), status::BadTypeMismatch);
     // Structures: the ExtensionObject's encoding must belong to the DataType or a subtype.
     NodeId argVar = addVar("Arg", ns0::Argument, Variant(toExtensionObject(Argument{})));
-    EXPECT_TRUE(space.write(writeValue(argVar, Variant(toExtensionObject(argument("x", ns0::Int32)))))
-                    .isGood());
+    EXPECT_TRUE(
+        space.write(writeValue(argVar, Variant(toExtensionObject(argument("x", ns0::Int32)))))
+            .isGood());
     EXPECT_EQ(space.write(writeValue(argVar, Variant(toExtensionObject(EUInformation{})))),
               status::BadTypeMismatch);
     NodeId anyStruct = addVar("AnyStruct", ns0::Structure, Variant(toExtensionObject(Argument{})));
-    EXPECT_TRUE(space.write(writeValue(anyStruct, Variant(toExtensionObject(EUInformation{})))).isGood());
+    EXPECT_TRUE(
+        space.write(writeValue(anyStruct, Variant(toExtensionObject(EUInformation{})))).isGood());
     EXPECT_EQ(space.write(writeValue(anyStruct, Variant(Int32{1}))), status::BadTypeMismatch);
     // BaseDataType with ValueRank Any takes anything.
     NodeId any = addVar("Any", ns0::BaseDataType, Variant(), -2);
@@ -507,8 +516,9 @@ TEST_F(Write, AccessChecks) {
     va.writeMask = write_mask::DisplayName | write_mask::Description;
     va.accessLevel = access_level::CurrentRead | access_level::CurrentWrite;
     NodeId w = space.addVariable(ns0(ns0::ObjectsFolder), id("W"), name("W"), va);
-    EXPECT_TRUE(space.writeAttribute(w, AttributeId::DisplayName, Variant(LocalizedText("de", "Wert")))
-                    .isGood());
+    EXPECT_TRUE(
+        space.writeAttribute(w, AttributeId::DisplayName, Variant(LocalizedText("de", "Wert")))
+            .isGood());
     EXPECT_EQ(*space.readAttribute(w, AttributeId::DisplayName).value->scalar<LocalizedText>(),
               LocalizedText("de", "Wert"));
     EXPECT_EQ(space.writeAttribute(w, AttributeId::Description, Variant(String("no"))),
@@ -554,11 +564,13 @@ TEST_F(Write, ValueCallbacks) {
                                                  EXPECT_EQ(n, v);
                                                  Int32 x = *dv.value->scalar<Int32>();
                                                  seen.push_back(x);
-                                                 return x < 0 ? status::BadOutOfRange : StatusCode{};
+                                                 return x < 0 ? status::BadOutOfRange
+                                                              : StatusCode{};
                                              }});
     EXPECT_TRUE(space.write(writeValue(v, Variant(Int32{5}))).isGood());
     EXPECT_EQ(space.write(writeValue(v, Variant(Int32{-1}))), status::BadOutOfRange);
-    EXPECT_EQ(space.write(writeValue(v, Variant(1.0))), status::BadTypeMismatch);  // before callback
+    EXPECT_EQ(space.write(writeValue(v, Variant(1.0))),
+              status::BadTypeMismatch);  // before callback
     EXPECT_EQ(seen, (std::vector<Int32>{5, -1}));
     EXPECT_EQ(*space.readValue(v).value->scalar<Int32>(), 5);  // stored (no read callback)
     // Read callback: live value, the stored one is ignored.
@@ -580,16 +592,18 @@ TEST_F(Write, ValueCallbacks) {
     EXPECT_EQ(*space.readValue(v).value->scalar<Int32>(), 7);
     EXPECT_EQ(reads, 2);
     // Read-only callback: not writable.
-    space.setValueCallback(v, ValueCallbacks{[](const NodeId&) { return DataValue(Variant(Int32{1})); }, {}});
+    space.setValueCallback(
+        v, ValueCallbacks{[](const NodeId&) { return DataValue(Variant(Int32{1})); }, {}});
     EXPECT_EQ(space.write(writeValue(v, Variant(Int32{2}))), status::BadNotWritable);
     // IndexRange write through callbacks merges into the current value.
     std::vector<Int32> backing{1, 2, 3};
     NodeId arr = addVar("CbArr", ns0::Int32, Variant(std::vector<Int32>{}), 1);
-    space.setValueCallback(arr, ValueCallbacks{[&](const NodeId&) { return DataValue(Variant(backing)); },
-                                               [&](const NodeId&, const DataValue& dv) {
-                                                   backing = *dv.value->array<Int32>();
-                                                   return StatusCode{};
-                                               }});
+    space.setValueCallback(
+        arr, ValueCallbacks{[&](const NodeId&) { return DataValue(Variant(backing)); },
+                            [&](const NodeId&, const DataValue& dv) {
+                                backing = *dv.value->array<Int32>();
+                                return StatusCode{};
+                            }});
     EXPECT_TRUE(space.write(writeValue(arr, Variant(std::vector<Int32>{9}), "1")).isGood());
     EXPECT_EQ(backing, (std::vector<Int32>{1, 9, 3}));
     // Removing the callbacks returns to the stored value.
@@ -600,15 +614,18 @@ TEST_F(Write, ValueCallbacks) {
 TEST_F(Write, SetValueFromApplicationThread) {
     NodeId v = addVar("Live", ns0::Double, Variant(0.0), -1, access_level::CurrentRead);
     std::thread app([&] {
-        for (int i = 1; i <= 100; ++i) EXPECT_TRUE(space.setValue(v, DataValue(Variant(i * 1.0))).isGood());
+        for (int i = 1; i <= 100; ++i)
+            EXPECT_TRUE(space.setValue(v, DataValue(Variant(i * 1.0))).isGood());
     });
     app.join();
     EXPECT_EQ(*space.readValue(v).value->scalar<Double>(), 100.0);
     EXPECT_EQ(space.setValue(v, DataValue(Variant(Int32{1}))), status::BadTypeMismatch);
     EXPECT_EQ(space.setValue(id("nope"), DataValue(Variant(1.0))), status::BadNodeIdUnknown);
-    EXPECT_EQ(space.setValue(ns0(ns0::Server), DataValue(Variant(1.0))), status::BadNodeClassInvalid);
+    EXPECT_EQ(space.setValue(ns0(ns0::Server), DataValue(Variant(1.0))),
+              status::BadNodeClassInvalid);
     // Namespace-0 variables are set by the application the same way.
-    EXPECT_TRUE(space.setValue(ns0(ns0::Server_ServerStatus_State), DataValue(Variant(Int32{0}))).isGood());
+    EXPECT_TRUE(
+        space.setValue(ns0(ns0::Server_ServerStatus_State), DataValue(Variant(Int32{0}))).isGood());
     EXPECT_EQ(*space.readValue(ns0(ns0::Server_ServerStatus_State)).value->scalar<Int32>(), 0);
     EXPECT_EQ(space.setValue(ns0(ns0::Server_ServerStatus_CurrentTime), DataValue(Variant(1.0))),
               status::BadTypeMismatch);

@@ -31,7 +31,8 @@ inline WriteValue writeValue(const NodeId& id, Variant v, std::string range = {}
     return w;
 }
 
-inline BrowseDescription browseDesc(const NodeId& id, BrowseDirection dir = BrowseDirection::Forward,
+inline BrowseDescription browseDesc(const NodeId& id,
+                                    BrowseDirection dir = BrowseDirection::Forward,
                                     const NodeId& refType = NodeId(0, ns0::References),
                                     bool subtypes = true, UInt32 classMask = 0,
                                     UInt32 resultMask = 63) {

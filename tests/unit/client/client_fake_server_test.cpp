@@ -383,8 +383,14 @@ TEST_F(ClientFake, DefaultDeadlineIsTheConfiguredRequestTimeout) {
     EXPECT_EQ(statusOf([&] { c.writeValue(kInt32, Int32{1}, Clock::now() + 50ms); }),
               status::BadTimeout);
     EXPECT_LT(Clock::now() - t0, 300ms);
-    // A deadline already passed.
+    // A deadline already passed: not even sent.
+    std::size_t reads = server.count<ReadRequest>();
     EXPECT_EQ(statusOf([&] { c.readValue(kInt32, Clock::now() - 1s); }), status::BadTimeout);
+    std::optional<Result<Variant>> got;
+    c.readValueAsync(kInt32, [&](Result<Variant> r) { got = std::move(r); }, Clock::now() - 1s);
+    ASSERT_TRUE(got);
+    EXPECT_EQ(got->status(), status::BadTimeout);
+    EXPECT_EQ(server.count<ReadRequest>(), reads);
     EXPECT_EQ(c.readValue(kInt32), Variant(Int32{7}));
 }
 

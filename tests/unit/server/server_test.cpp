@@ -1,11 +1,12 @@
 // The server's session and dispatch layer, exercised by our client over real sockets.
+#include "ua/server/server.hpp"
+
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <thread>
 
 #include "ua/client/client.hpp"
-#include "ua/server/server.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
 #include "ua/types/status_codes.hpp"
@@ -130,9 +131,13 @@ TEST(Server, UserNameAccessControl) {
     server.start();
     Client c;
     EXPECT_EQ(errorOf([&] { c.connect(url(server)); }), status::BadIdentityTokenRejected);
-    EXPECT_EQ(errorOf([&] { c.connect(url(server), client::UserName{"operator", "wrong"}); }),
+    EXPECT_EQ(errorOf([&] {
+                  c.connect(url(server), client::UserName{"operator", "wrong"});
+              }),
               status::BadUserAccessDenied);
-    EXPECT_EQ(errorOf([&] { c.connect(url(server), client::UserName{"nobody", "secret"}); }),
+    EXPECT_EQ(errorOf([&] {
+                  c.connect(url(server), client::UserName{"nobody", "secret"});
+              }),
               status::BadUserAccessDenied);
     EXPECT_NO_THROW(c.connect(url(server), client::UserName{"operator", "secret"}));
     EXPECT_NO_THROW(c.readValue(NodeId(0, ns0::Server_ServerStatus_CurrentTime)));
@@ -186,14 +191,14 @@ TEST(Server, SlowMethodDoesNotBlockOtherClients) {
     auto& as = server.addressSpace();
     UInt16 ns = server.addNamespace("urn:pnp:test:nodes");
     std::vector<std::thread> workers;
-    as.addMethod(NodeId(0, ns0::ObjectsFolder), NodeId(ns, "Slow"), QualifiedName{ns, "Slow"}, {},
-                 {}, [&](const server::MethodCallContext&, std::vector<Variant>,
-                         server::MethodCompletion done) {
-                     workers.emplace_back([done] {
-                         std::this_thread::sleep_for(500ms);
-                         done.succeed({});
-                     });
-                 });
+    as.addMethod(
+        NodeId(0, ns0::ObjectsFolder), NodeId(ns, "Slow"), QualifiedName{ns, "Slow"}, {}, {},
+        [&](const server::MethodCallContext&, std::vector<Variant>, server::MethodCompletion done) {
+            workers.emplace_back([done] {
+                std::this_thread::sleep_for(500ms);
+                done.succeed({});
+            });
+        });
     server.start();
     Client slow, fast;
     slow.connect(url(server));

@@ -572,5 +572,70 @@ TEST_F(ChannelPair, ClientReportsServerError) {
     EXPECT_EQ(client->state(), ClientChannel::State::Closed);
 }
 
+// Mutated client byte streams: the server channel never throws, never delivers a request
+// after an error, and every close comes with an ERR (or is a clean CLO).
+TEST_F(ChannelPair, MutatedStreamsAreRejectedCleanly) {
+    open();
+    client->send(request(kEchoRequest, pattern(100)));
+    client->send(request(kEchoRequest, pattern(20000, 2)));  // 3 chunks
+    client->renewIfDue(now + 8s);
+    client->send(request(kEchoRequest, pattern(10, 3)));
+    client->close();
+    Buffer stream;
+    for (auto& b : toServer) stream.insert(stream.end(), b.begin(), b.end());
+    toServer.clear();
+    // sentToServer holds HEL and OPN of open().
+    Buffer full;
+    for (auto& b : sentToServer) full.insert(full.end(), b.begin(), b.end());
+    full.insert(full.end(), stream.begin(), stream.end());
+
+    std::mt19937 rng(12345);
+    int closedWithError = 0, survived = 0;
+    for (int iter = 0; iter < 3000; ++iter) {
+        Buffer m = full;
+        switch (rng() % 4) {
+            case 0:  // flip bytes
+                for (unsigned k = 0, n = 1 + rng() % 4; k < n; ++k)
+                    m[rng() % m.size()] ^= 1u << (rng() % 8);
+                break;
+            case 1:  // overwrite a UInt32 with an extreme value
+            {
+                std::size_t at = rng() % (m.size() - 4);
+                UInt32 v = (rng() % 2) ? 0xFFFFFFFFu : 0x80000000u + (rng() % 1000);
+                putUInt32(m.data() + at, v);
+                break;
+            }
+            case 2:  // truncate
+                m.resize(rng() % m.size());
+                break;
+            default:  // insert junk
+            {
+                Buffer junk = pattern(1 + rng() % 40, static_cast<unsigned>(iter));
+                m.insert(m.begin() + static_cast<std::ptrdiff_t>(rng() % m.size()), junk.begin(),
+                         junk.end());
+            }
+        }
+        std::deque<Buffer> out;
+        ServerSide side;
+        side.out = &out;
+        ServerChannel ch(scfg, side, now);
+        std::size_t slice = 1 + rng() % 3000;
+        for (std::size_t off = 0; off < m.size(); off += slice)
+            ch.feed(m.data() + off, std::min(slice, m.size() - off), now);
+        if (ch.isClosed()) {
+            if (ch.closeStatus().isBad()) {
+                ++closedWithError;
+                auto chunks = chunksOf(out);
+                ASSERT_FALSE(chunks.empty());
+                EXPECT_EQ(decodeMessageHeader(chunks.back().data()).type, MessageType::Error);
+            }
+        } else {
+            ++survived;
+        }
+    }
+    EXPECT_GT(closedWithError, 500);
+    std::printf("[ mutation ] %d rejected with ERR, %d still open\n", closedWithError, survived);
+}
+
 }  // namespace
 }  // namespace pnp::ua::transport

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <cstdio>
 #include <future>
 #include <mutex>
@@ -133,6 +134,25 @@ class RawSocket {
             if (k <= 0) return false;
             c += k;
             n -= static_cast<std::size_t>(k);
+        }
+        return true;
+    }
+    // Sends without blocking for longer than `limit` in total; false when the peer did not
+    // take everything in time.
+    bool trySend(const Buffer& b, std::chrono::milliseconds limit) {
+        auto end = Clock::now() + limit;
+        std::size_t off = 0;
+        while (off < b.size()) {
+            ssize_t k = ::send(fd_, b.data() + off, b.size() - off, MSG_NOSIGNAL | MSG_DONTWAIT);
+            if (k > 0) {
+                off += static_cast<std::size_t>(k);
+                continue;
+            }
+            if (k < 0 && errno != EAGAIN && errno != EWOULDBLOCK) return false;
+            auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - Clock::now());
+            if (left.count() <= 0) return false;
+            pollfd p{fd_, POLLOUT, 0};
+            ::poll(&p, 1, static_cast<int>(left.count()));
         }
         return true;
     }
@@ -651,6 +671,32 @@ TEST_F(TcpTest, AbortChunkKeepsConnection) {
     auto h = decodeMessageHeader(resp->data());
     EXPECT_EQ(h.type, MessageType::Message);
     EXPECT_EQ(getUInt32(resp->data() + 20), 2u);  // request 1 was dropped
+    expectObserverWorks();
+}
+
+TEST_F(TcpTest, ClientThatNeverReadsIsThrottled) {
+    start();
+    RawClient raw(server->port());
+    ASSERT_TRUE(raw.open());
+    // Send 8 KB echo requests (one chunk each) without reading the responses until the
+    // server stops reading (its queued output is bounded, then the kernel buffers fill up).
+    Buffer body = pattern(8000);
+    std::size_t sentBytes = 0;
+    UInt32 seq = 2;
+    auto end = Clock::now() + 20s;
+    while (Clock::now() < end && sentBytes < (512u << 20)) {
+        Buffer m = raw.msg(seq, seq, body);
+        if (!raw.sock.trySend(m, 300ms)) break;  // the server stopped reading
+        sentBytes += m.size();
+        ++seq;
+    }
+    std::printf("[ throttle ] server stopped reading after %.1f MiB of unanswered requests\n",
+                static_cast<double>(sentBytes) / (1 << 20));
+    EXPECT_LT(sentBytes, 128u << 20);
+    // Still a working connection: nothing was answered with an ERR.
+    auto first = raw.sock.readChunk();
+    ASSERT_TRUE(first);
+    EXPECT_EQ(decodeMessageHeader(first->data()).type, MessageType::Message);
     expectObserverWorks();
 }
 

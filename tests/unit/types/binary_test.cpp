@@ -1,6 +1,7 @@
+#include "ua/types/binary.hpp"
+
 #include <gtest/gtest.h>
 
-#include "ua/types/binary.hpp"
 #include "ua/types/status_codes.hpp"
 
 using namespace pnp::ua;
@@ -29,12 +30,12 @@ StatusCode decodeStatus(const Buffer& b, const DecodeLimits& limits = {}) {
 TEST(BinaryEncoding, NodeIdFormsMatchTheSpec) {
     EXPECT_EQ(enc(NodeId(0, 72u)), (Buffer{0x00, 0x48}));
     EXPECT_EQ(enc(NodeId(5, 1025u)), (Buffer{0x01, 0x05, 0x01, 0x04}));
-    EXPECT_EQ(enc(NodeId(1, "Hot水")),
-              (Buffer{0x03, 0x01, 0x00, 0x06, 0x00, 0x00, 0x00, 0x48, 0x6F, 0x74, 0xE6, 0xB0, 0xB4}));
+    EXPECT_EQ(enc(NodeId(1, "Hot水")), (Buffer{0x03, 0x01, 0x00, 0x06, 0x00, 0x00, 0x00, 0x48, 0x6F,
+                                               0x74, 0xE6, 0xB0, 0xB4}));
     EXPECT_EQ(enc(NodeId(2, 70000u)), (Buffer{0x02, 0x02, 0x00, 0x70, 0x11, 0x01, 0x00}));
     auto g = *Guid::parse("72962B91-FA75-4AE6-8D28-B404DC7DAF63");
-    EXPECT_EQ(enc(g), (Buffer{0x91, 0x2B, 0x96, 0x72, 0x75, 0xFA, 0xE6, 0x4A, 0x8D, 0x28, 0xB4, 0x04,
-                              0xDC, 0x7D, 0xAF, 0x63}));
+    EXPECT_EQ(enc(g), (Buffer{0x91, 0x2B, 0x96, 0x72, 0x75, 0xFA, 0xE6, 0x4A, 0x8D, 0x28, 0xB4,
+                              0x04, 0xDC, 0x7D, 0xAF, 0x63}));
 }
 
 TEST(BinaryEncoding, StringsAndNulls) {
@@ -65,16 +66,32 @@ TEST(BinaryEncoding, EveryBuiltinScalarAndArrayRoundTrips) {
     ExtensionObject xo{NodeId(0, 886u), ExtensionObject::Encoding::Binary, std::string(16, 'x')};
 
     std::vector<Variant> values = {
-        Variant(true), Variant(SByte(-5)), Variant(Byte(200)), Variant(Int16(-300)),
-        Variant(UInt16(60000)), Variant(Int32(-70000)), Variant(UInt32(4000000000u)),
-        Variant(Int64(-1) << 40), Variant(UInt64(1) << 63), Variant(Float(1.5f)),
-        Variant(Double(-2.25)), Variant(String("hello")), Variant(DateTime::now()),
+        Variant(true),
+        Variant(SByte(-5)),
+        Variant(Byte(200)),
+        Variant(Int16(-300)),
+        Variant(UInt16(60000)),
+        Variant(Int32(-70000)),
+        Variant(UInt32(4000000000u)),
+        Variant(Int64(-1) << 40),
+        Variant(UInt64(1) << 63),
+        Variant(Float(1.5f)),
+        Variant(Double(-2.25)),
+        Variant(String("hello")),
+        Variant(DateTime::now()),
         Variant(*Guid::parse("72962B91-FA75-4AE6-8D28-B404DC7DAF63")),
-        Variant(ByteString(std::string("\x00\x01\x02", 3))), Variant(XmlElement{"<a/>"}),
-        Variant(NodeId(3, "n")), Variant(ExpandedNodeId(NodeId(0, 5u), "urn:x", 2)),
-        Variant(StatusCode(0x80340000)), Variant(QualifiedName{2, "q"}),
-        Variant(LocalizedText("en", "t")), Variant(xo), Variant(dv), Variant(diag),
-        Variant(std::vector<Int32>{1, 2, 3}), Variant(std::vector<Boolean>{true, false}),
+        Variant(ByteString(std::string("\x00\x01\x02", 3))),
+        Variant(XmlElement{"<a/>"}),
+        Variant(NodeId(3, "n")),
+        Variant(ExpandedNodeId(NodeId(0, 5u), "urn:x", 2)),
+        Variant(StatusCode(0x80340000)),
+        Variant(QualifiedName{2, "q"}),
+        Variant(LocalizedText("en", "t")),
+        Variant(xo),
+        Variant(dv),
+        Variant(diag),
+        Variant(std::vector<Int32>{1, 2, 3}),
+        Variant(std::vector<Boolean>{true, false}),
         Variant(std::vector<String>{"a", "", "c"}),
         Variant(std::vector<Variant>{Variant(1.0), Variant(std::vector<Byte>{1, 2})}),
         Variant(std::vector<DataValue>{dv, DataValue()}),

@@ -1,6 +1,6 @@
-#include <gtest/gtest.h>
-
 #include "ua/types/builtin.hpp"
+
+#include <gtest/gtest.h>
 
 using namespace pnp::ua;
 
@@ -54,7 +54,8 @@ TEST(Guid, ParseAndPrint) {
 }
 
 TEST(ByteString, Base64) {
-    for (std::string raw : {"", "a", "ab", "abc", "abcd", std::string("\0\xff\x10", 3)}) {
+    for (std::string raw :
+         std::vector<std::string>{"", "a", "ab", "abc", "abcd", std::string("\0\xff\x10", 3)}) {
         ByteString b(raw);
         auto back = ByteString::fromBase64(b.toBase64());
         ASSERT_TRUE(back);
