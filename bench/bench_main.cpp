@@ -406,7 +406,8 @@ std::string rttJson(const std::vector<RttRow>& rows) {
     std::string s = "[";
     for (std::size_t i = 0; i < rows.size(); ++i) {
         const auto& r = rows[i];
-        s += (i ? "," : "") + std::string("{\"bytes\":") + std::to_string(r.bytes) +
+        if (i) s += ',';
+        s += "{\"bytes\":" + std::to_string(r.bytes) +
              ",\"n\":" + std::to_string(r.ua.n) + ",\"ua_median_us\":" + num(r.ua.median) +
              ",\"ua_p99_us\":" + num(r.ua.p99) + ",\"raw_median_us\":" + num(r.raw.median) +
              ",\"raw_p99_us\":" + num(r.raw.p99) +
@@ -743,7 +744,8 @@ int run(Options o) {
         j += ",\"idle_server\":[";
         for (std::size_t i = 0; i < res.idle.size(); ++i) {
             const auto& d = res.idle[i];
-            j += (i ? "," : "") + std::string("{\"server\":") + jstr(d.label) +
+            if (i) j += ',';
+            j += "{\"server\":" + jstr(d.label) +
                  ",\"accepting_ms\":" + summaryJson(d.listen) +
                  ",\"listening_line_ms\":" + summaryJson(d.listenLine) +
                  ",\"vmrss_kb\":" + summaryJson(d.rssKb, 0) + ",\"vmhwm_kb\":" + summaryJson(d.hwmKb, 0) +

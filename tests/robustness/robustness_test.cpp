@@ -16,6 +16,7 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -719,7 +720,9 @@ TEST_F(Robustness, UnknownRequestTypeGetsServiceFault) {
         UInt32 handle = 0;
         EXPECT_EQ(serviceFault(r.typeId, r.body, &handle), status::BadServiceUnsupported)
             << type.toString();
-        if (type.namespaceIndex() == 0) EXPECT_EQ(handle, 31337u) << type.toString();
+        if (type.namespaceIndex() == 0) {
+            EXPECT_EQ(handle, 31337u) << type.toString();
+        }
     }
     EXPECT_TRUE(c->isOpen());
     EXPECT_EQ(readValueOn(*c, token), readValueOn(*c, token));
@@ -783,6 +786,39 @@ TEST_F(Robustness, MalformedVariantsInWriteGetServiceFault) {
 }
 
 // ---- resource exhaustion -----------------------------------------------------------------
+long maxRssMiB() {
+    rusage ru{};
+    ::getrusage(RUSAGE_SELF, &ru);
+    return ru.ru_maxrss / 1024;
+}
+
+TEST_F(Robustness, NestedArraysDoNotMultiplyMemory) {
+    // Variant arrays of Variant arrays, 25 deep, each claiming as many elements as bytes are
+    // left, the innermost one 200000 null Variants: ~200 KB on the wire. Each level's count
+    // passes the "fits into the remaining bytes" check against the same bytes; allocating
+    // every level up front took 25 x 200000 x sizeof(Variant) (~600 MB) for a request that
+    // can only fail.
+    NodeId token;
+    auto c = sessionConnection(token);
+    constexpr int kDepth = 25;
+    constexpr Int32 kNulls = 200'000;
+    Buffer v;
+    for (int i = 0; i < kDepth; ++i) {
+        v.push_back(0x80 | 24);
+        Buffer n = encodeToBuffer(Int32{5 * (kDepth - 1 - i) + kNulls});
+        v.insert(v.end(), n.begin(), n.end());
+    }
+    v.resize(v.size() + kNulls, 0);
+    const long before = maxRssMiB();
+    auto r = roundTrip(*c, writeWithRawVariant(token, 5, v));
+    const long grown = maxRssMiB() - before;
+    EXPECT_EQ(serviceFault(r.typeId, r.body), status::BadDecodingError);
+    EXPECT_LT(grown, 300) << "decoding a " << v.size() / 1024 << " KiB request peaked at +"
+                          << grown << " MiB";
+    EXPECT_TRUE(c->isOpen());
+    EXPECT_EQ(readValueOn(*c, token), readValueOn(*c, token));
+}
+
 TEST_F(Robustness, ManySilentConnectionsAreClosedByTheHelloTimeout) {
     constexpr int kCount = 200;
     std::vector<std::unique_ptr<RawSocket>> socks;

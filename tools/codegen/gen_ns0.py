@@ -26,6 +26,7 @@ import sys
 import time
 from typing import Dict, List, Optional, Tuple
 
+sys.dont_write_bytecode = True  # no __pycache__ in the source tree
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import cpp_names as N  # noqa: E402

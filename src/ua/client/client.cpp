@@ -30,7 +30,7 @@ constexpr std::size_t kNonceLength = 32;
 // Callbacks collected while the lock is held and run after it was released (the object is
 // declared before the lock, so it is destroyed after the lock).
 class Completions {
-public:
+  public:
     Completions() = default;
     Completions(const Completions&) = delete;
     Completions& operator=(const Completions&) = delete;
@@ -54,7 +54,7 @@ public:
         return n;
     }
 
-private:
+  private:
     std::vector<std::function<void()>> items_;
 };
 
@@ -103,7 +103,7 @@ std::string describe(std::string_view service, const NodeId& node) {
 
 // ---------------------------------------------------------------------------------------------
 class Client::Impl {
-public:
+  public:
     explicit Impl(ClientConfig c) : config(std::move(c)), backoff(config.reconnect.initialDelay) {}
     ~Impl() {
         if (wakeFd >= 0) ::close(wakeFd);
@@ -226,10 +226,9 @@ public:
 
     void failPending(StatusCode s, std::string_view why, Completions& done) {
         for (auto& [id, p] : pending) {
-            done.add([cb = std::move(p.callback), s, msg = std::string(p.service) + ": " +
-                                                          std::string(why)] {
-                cb(Error(s, msg));
-            });
+            done.add(
+                [cb = std::move(p.callback), s,
+                 msg = std::string(p.service) + ": " + std::string(why)] { cb(Error(s, msg)); });
         }
         pending.clear();
         nextAsyncDeadline = Clock::time_point::max();
@@ -257,7 +256,8 @@ public:
     IncomingResponse await(UInt32 id, Clock::time_point deadline, std::string_view service,
                            Completions& done) {
         for (;;) {
-            std::optional<IncomingResponse> m = conn->receive(std::min(deadline, nextAsyncDeadline));
+            std::optional<IncomingResponse> m =
+                conn->receive(std::min(deadline, nextAsyncDeadline));
             Clock::time_point now = Clock::now();
             if (!m) {
                 if (now >= deadline) {
@@ -345,7 +345,8 @@ public:
             if (!ep.securityPolicyUri.empty() && ep.securityPolicyUri != kSecurityPolicyNone)
                 continue;
             for (const auto& t : ep.userIdentityTokens) {
-                bool plain = t.securityPolicyUri.empty() || t.securityPolicyUri == kSecurityPolicyNone;
+                bool plain =
+                    t.securityPolicyUri.empty() || t.securityPolicyUri == kSecurityPolicyNone;
                 if (!anonymous && t.tokenType == UserTokenType::Anonymous) {
                     s.anonymousPolicyId = t.policyId;
                     anonymous = true;
@@ -415,8 +416,7 @@ public:
     // A connection that was idle for a while may have been closed by the server: look at the
     // socket before using it.
     void checkIdleConnection(Clock::time_point now, Completions& done) {
-        if (config.idleCheckAfter.count() <= 0 || now - lastReceive < config.idleCheckAfter)
-            return;
+        if (config.idleCheckAfter.count() <= 0 || now - lastReceive < config.idleCheckAfter) return;
         pollfd p{conn->nativeHandle(), POLLIN | POLLRDHUP, 0};
         if (::poll(&p, 1, 0) <= 0 || p.revents == 0) return;
         try {
@@ -459,7 +459,8 @@ public:
     void checkDeadline(Clock::time_point deadline, std::string_view service) {
         if (Clock::now() >= deadline) {
             ++stats.timeouts;
-            throw Error(status::BadTimeout, std::string(service) + ": deadline passed before sending");
+            throw Error(status::BadTimeout,
+                        std::string(service) + ": deadline passed before sending");
         }
     }
 
@@ -850,8 +851,7 @@ std::vector<BrowseResult> Client::browse(std::vector<BrowseDescription> nodes,
 BrowseResult Client::browse(const BrowseDescription& node, UInt32 maxReferencesPerNode,
                             Deadline deadline) {
     auto results = browse(std::vector<BrowseDescription>{node}, maxReferencesPerNode, deadline);
-    if (results.size() != 1)
-        throw Error(status::BadUnexpectedError, "Browse: expected one result");
+    if (results.size() != 1) throw Error(status::BadUnexpectedError, "Browse: expected one result");
     return std::move(results.front());
 }
 
@@ -1027,8 +1027,8 @@ DataValue Client::readAttribute(const NodeId& node, AttributeId attribute, Deadl
 
 Variant Client::readValue(const NodeId& node, Deadline deadline) {
     return valueOf(
-        singleResult(request(singleRead(node, AttributeId::Value, TimestampsToReturn::Neither),
-                             deadline)),
+        singleResult(
+            request(singleRead(node, AttributeId::Value, TimestampsToReturn::Neither), deadline)),
         node);
 }
 
@@ -1139,8 +1139,7 @@ void Client::callAsync(const NodeId& object, const NodeId& method, std::vector<V
 std::vector<std::string> Client::namespaceArray(Deadline deadline) {
     Variant v = readValue(NodeId(0, ns0::Server_NamespaceArray), deadline);
     const auto* a = v.array<String>();
-    if (!a)
-        throw Error(status::BadTypeMismatch, "Read of NamespaceArray: not an array of String");
+    if (!a) throw Error(status::BadTypeMismatch, "Read of NamespaceArray: not an array of String");
     std::lock_guard lock(impl_->mutex);
     impl_->namespaces = *a;
     return *a;

@@ -6,7 +6,8 @@
 //   Variant v = client.readValue(NodeId(0, ns0::Server_ServerStatus_CurrentTime));
 //   UInt16 demo = client.namespaceIndex("urn:pnp:demo");
 //   client.writeValue(NodeId(demo, "Scalar.Int32"), Int32{42});
-//   CallResult r = client.call(NodeId(demo, "Demo"), NodeId(demo, "Demo.Add"), {Int32{2}, Int32{3}});
+//   CallResult r = client.call(NodeId(demo, "Demo"), NodeId(demo, "Demo.Add"), {Int32{2},
+//   Int32{3}});
 //
 // Services. Every service is built on the generic request<Req, Resp>(req, deadline), which
 // fills the RequestHeader, encodes straight into the transport's message buffer, sends,
@@ -98,25 +99,25 @@ struct BrowseOptions {
     BrowseDirection direction = BrowseDirection::Forward;
     NodeId referenceTypeId = NodeId(0, 33);  // HierarchicalReferences
     bool includeSubtypes = true;
-    UInt32 nodeClassMask = 0;           // 0: all node classes
-    UInt32 resultMask = 0x3F;           // all ReferenceDescription fields
-    UInt32 maxReferencesPerNode = 0;    // per Browse/BrowseNext; 0: the server's choice
+    UInt32 nodeClassMask = 0;         // 0: all node classes
+    UInt32 resultMask = 0x3F;         // all ReferenceDescription fields
+    UInt32 maxReferencesPerNode = 0;  // per Browse/BrowseNext; 0: the server's choice
 };
 
 struct ClientStats {
     std::uint64_t requestsSent = 0;
-    std::uint64_t timeouts = 0;               // calls that ran past their deadline
-    std::uint64_t discardedResponses = 0;     // late or unknown responses
+    std::uint64_t timeouts = 0;            // calls that ran past their deadline
+    std::uint64_t discardedResponses = 0;  // late or unknown responses
     std::uint64_t connectionsLost = 0;
-    std::uint64_t reconnects = 0;             // successful reconnects
+    std::uint64_t reconnects = 0;  // successful reconnects
     std::uint64_t sessionsCreated = 0;
-    std::uint64_t sessionsReactivated = 0;    // ActivateSession on a new channel
-    std::uint64_t retries = 0;                // requests sent again after a reconnect
+    std::uint64_t sessionsReactivated = 0;  // ActivateSession on a new channel
+    std::uint64_t retries = 0;              // requests sent again after a reconnect
     std::uint64_t keepAlives = 0;
 };
 
 class Client {
-public:
+  public:
     explicit Client(ClientConfig config = {});
     // Stops the background thread, closes the session (CloseSession) and the channel (CLO);
     // never throws. Pending async callbacks complete with BadShutdown.
@@ -159,7 +160,7 @@ public:
 
     // Asynchronous forms; see "Asynchronous calls and threads" above.
     template <class Req, class Resp = ResponseOf<Req>, class F>
-        requires std::invocable<F&, Result<Resp>>
+    requires std::invocable<F&, Result<Resp>>
     void requestAsync(Req req, F callback, Deadline deadline = {});
     template <class Req, class Resp = ResponseOf<Req>>
     std::future<Resp> requestAsync(Req req, Deadline deadline = {});
@@ -184,8 +185,8 @@ public:
                                              Deadline deadline = {});
     BrowseResult browseNext(const ByteString& continuationPoint, bool release = false,
                             Deadline deadline = {});
-    std::vector<BrowseResult> browseNext(std::vector<ByteString> continuationPoints,
-                                         bool release, Deadline deadline = {});
+    std::vector<BrowseResult> browseNext(std::vector<ByteString> continuationPoints, bool release,
+                                         Deadline deadline = {});
     std::vector<BrowsePathResult> translateBrowsePaths(std::vector<BrowsePath> paths,
                                                        Deadline deadline = {});
     // The node at a text path (see browse_path.hpp), from the Root folder when the path is
@@ -252,7 +253,7 @@ public:
 
     class Impl;
 
-private:
+  private:
     // Appends the request (encoding NodeId + body) to `buffer`, with `header` as its
     // RequestHeader. The header is swapped in and out of the request around the encoding,
     // so neither is copied (no allocation for the authentication token).
@@ -301,8 +302,7 @@ template <class Resp>
 Resp Client::decodeIncoming(const transport::IncomingResponse& r, std::string_view service,
                             const DecodeLimits& limits) {
     if (r.status.isBad()) throw Error(r.status, std::string(service) + ": response aborted");
-    return detail::decodeResponse<Resp>(r.typeId, r.body.data(), r.body.size(), service,
-                                        limits);
+    return detail::decodeResponse<Resp>(r.typeId, r.body.data(), r.body.size(), service, limits);
 }
 
 template <class Req, class Resp>
@@ -314,12 +314,12 @@ Resp Client::request(Req req, Deadline deadline) {
 }
 
 template <class Req, class Resp, class F>
-    requires std::invocable<F&, Result<Resp>>
+requires std::invocable<F&, Result<Resp>>
 void Client::requestAsync(Req req, F callback, Deadline deadline) {
     constexpr std::string_view service = detail::serviceName<Req>();
     sendAsync(encoderFor(req), deadline, service,
-              [cb = std::move(callback), limits = decodeLimits()](
-                  Result<transport::IncomingResponse> r) mutable {
+              [cb = std::move(callback),
+               limits = decodeLimits()](Result<transport::IncomingResponse> r) mutable {
                   auto result = [&]() -> Result<Resp> {
                       if (!r.ok()) return *r.error();
                       try {

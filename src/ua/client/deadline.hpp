@@ -16,7 +16,7 @@ namespace pnp::ua::client {
 using Clock = std::chrono::steady_clock;
 
 class Deadline {
-public:
+  public:
     // The default: the relevant timeout of the ClientConfig, counted from the call.
     constexpr Deadline() = default;
     // Relative to the moment of the call.
@@ -34,14 +34,17 @@ public:
     // The absolute time point; `fallback` is used for a default Deadline.
     constexpr Clock::time_point resolve(Clock::time_point now, Clock::duration fallback) const {
         switch (kind_) {
-            case Kind::Absolute: return abs_;
-            case Kind::Relative: return addSaturated(now, rel_);
-            case Kind::Default: break;
+            case Kind::Absolute:
+                return abs_;
+            case Kind::Relative:
+                return addSaturated(now, rel_);
+            case Kind::Default:
+                break;
         }
         return addSaturated(now, fallback);
     }
 
-private:
+  private:
     enum class Kind : unsigned char { Default, Relative, Absolute };
     template <class Rep, class Period>
     static constexpr Clock::duration saturate(std::chrono::duration<Rep, Period> d) {

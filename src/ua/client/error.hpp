@@ -18,12 +18,12 @@
 namespace pnp::ua::client {
 
 class Error : public std::runtime_error {
-public:
+  public:
     // what() reads "<message>: BadTimeout (0x800A0000)".
     Error(StatusCode status, std::string_view message);
     StatusCode status() const noexcept { return status_; }
 
-private:
+  private:
     StatusCode status_;
 };
 
@@ -31,8 +31,8 @@ private:
 // have thrown.
 template <class T>
 class Result {
-public:
-    Result(T value) : v_(std::in_place_index<0>, std::move(value)) {}  // NOLINT
+  public:
+    Result(T value) : v_(std::in_place_index<0>, std::move(value)) {}      // NOLINT
     Result(Error error) : v_(std::in_place_index<1>, std::move(error)) {}  // NOLINT
 
     bool ok() const noexcept { return v_.index() == 0; }
@@ -51,7 +51,7 @@ public:
     T& operator*() & { return value(); }
     const T& operator*() const& { return value(); }
 
-private:
+  private:
     void check() const {
         if (!ok()) throw std::get<1>(v_);
     }

@@ -26,8 +26,8 @@ void throwUnexpectedResponse(const NodeId& typeId, const Byte* body, std::size_t
         if (!s.isBad()) s = status::BadUnexpectedError;
         throw Error(s, std::string(service) + " failed (ServiceFault)");
     }
-    throw Error(status::BadUnknownResponse, std::string(service) + ": unexpected response type " +
-                                                 typeId.toString());
+    throw Error(status::BadUnknownResponse,
+                std::string(service) + ": unexpected response type " + typeId.toString());
 }
 
 void checkServiceResult(const ResponseHeader& header, std::string_view service) {
@@ -36,8 +36,8 @@ void checkServiceResult(const ResponseHeader& header, std::string_view service) 
 }
 
 void throwDecodeError(const DecodeError& e, std::string_view service) {
-    throw Error(e.status(), std::string(service) + ": cannot decode the response (" + e.what() +
-                                ")");
+    throw Error(e.status(),
+                std::string(service) + ": cannot decode the response (" + e.what() + ")");
 }
 
 }  // namespace detail

@@ -54,11 +54,11 @@ struct ServiceTraits {
     static constexpr bool idempotent = false;
 };
 
-#define PNP_UA_CLIENT_SERVICE(Service, Idempotent)             \
-    template <>                                                \
-    struct ServiceTraits<Service##Request> {                   \
-        using Response = Service##Response;                    \
-        static constexpr bool idempotent = Idempotent;         \
+#define PNP_UA_CLIENT_SERVICE(Service, Idempotent)     \
+    template <>                                        \
+    struct ServiceTraits<Service##Request> {           \
+        using Response = Service##Response;            \
+        static constexpr bool idempotent = Idempotent; \
     }
 
 // Discovery
@@ -192,9 +192,8 @@ void encodeRequest(Buffer& out, const Req& req) {
 
 // Throws the Error that a response of the wrong type stands for: the serviceResult of a
 // ServiceFault, or BadUnknownResponse.
-[[noreturn]] void throwUnexpectedResponse(const NodeId& typeId, const Byte* body,
-                                          std::size_t size, std::string_view service,
-                                          const DecodeLimits& limits);
+[[noreturn]] void throwUnexpectedResponse(const NodeId& typeId, const Byte* body, std::size_t size,
+                                          std::string_view service, const DecodeLimits& limits);
 // Throws Error(header.serviceResult) when it is Bad.
 void checkServiceResult(const ResponseHeader& header, std::string_view service);
 [[noreturn]] void throwDecodeError(const DecodeError& e, std::string_view service);

@@ -175,8 +175,8 @@ struct LocalizedText {
 };
 
 // A structure carried opaquely: the NodeId of its encoding and its encoded body.
-// Typed access goes through the generated codecs: ExtensionObject::from(value) and
-// obj.decode<T>() (see ua/types/extension_object.hpp).
+// Typed access goes through the generated codecs: toExtensionObject(value) and
+// fromExtensionObject<T>(obj) (see ua/types/extension_object.hpp).
 struct ExtensionObject {
     enum class Encoding : Byte { None = 0, Binary = 1, Xml = 2 };
     NodeId typeId;  // the DataTypeEncoding node (e.g. i=886 "Range_Encoding_DefaultBinary")

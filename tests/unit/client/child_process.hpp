@@ -38,12 +38,12 @@ inline std::string findInPath(const std::string& name) {
 }
 
 inline bool fileExists(const std::string& p) {
-    struct stat st{};
+    struct stat st {};
     return ::stat(p.c_str(), &st) == 0;
 }
 
 class ChildProcess {
-public:
+  public:
     ChildProcess() = default;
     ChildProcess(const ChildProcess&) = delete;
     ChildProcess& operator=(const ChildProcess&) = delete;
@@ -156,7 +156,7 @@ public:
         return s.size() > max ? s.substr(s.size() - max) : s;
     }
 
-private:
+  private:
     pid_t pid_ = -1;
     int out_ = -1;
     std::string logPath_;

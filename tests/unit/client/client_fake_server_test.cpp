@@ -1,8 +1,7 @@
 // The client against the scripted FakeServer: sessions, services, error mapping, deadlines,
 // reconnect, asynchronous calls, the background thread.
-#include <sys/socket.h>
-
 #include <gtest/gtest.h>
+#include <sys/socket.h>
 
 #include <atomic>
 #include <chrono>
@@ -42,7 +41,7 @@ bool waitUntil(Pred pred, std::chrono::milliseconds timeout = 3000ms) {
 const NodeId kInt32(1, "Int32");
 
 class ClientFake : public ::testing::Test {
-protected:
+  protected:
     FakeServer server;
 };
 
@@ -114,7 +113,9 @@ TEST_F(ClientFake, UserNameIdentity) {
     EXPECT_EQ(u->password.bytes, "secret");
 
     Client bad;
-    EXPECT_EQ(statusOf([&] { bad.connect(server.url(), UserName{"operator", "wrong"}); }),
+    EXPECT_EQ(statusOf([&] {
+                  bad.connect(server.url(), UserName{"operator", "wrong"});
+              }),
               status::BadUserAccessDenied);
     EXPECT_FALSE(bad.isConnected());
     EXPECT_EQ(statusOf([&] { bad.readValue(kInt32); }), status::BadNotConnected);
@@ -277,9 +278,8 @@ TEST_F(ClientFake, NamespacesAreCached) {
     EXPECT_EQ(statusOf([&] { c.parseNodeId("garbage"); }), status::BadNodeIdInvalid);
     EXPECT_EQ(c.toNodeId(ExpandedNodeId(NodeId(0, "Int32"), "urn:fake:demo", 0)), kInt32);
     // A new server-side namespace shows up after a refresh.
-    server.setValue(NodeId(0, 2255),
-                    Variant(std::vector<String>{"http://opcfoundation.org/UA/", "urn:fake:demo",
-                                                "urn:new"}));
+    server.setValue(NodeId(0, 2255), Variant(std::vector<String>{"http://opcfoundation.org/UA/",
+                                                                 "urn:fake:demo", "urn:new"}));
     EXPECT_EQ(c.namespaceIndex("urn:new"), 2);
     EXPECT_EQ(c.namespaceArray().size(), 3u);
 }
@@ -322,7 +322,7 @@ TEST_F(ClientFake, DestructorAndDisconnectCloseTheSession) {
     EXPECT_EQ(server.count<CloseSessionRequest>(), 2u);
     EXPECT_FALSE(c.isConnected());
     EXPECT_EQ(statusOf([&] { c.readValue(kInt32); }), status::BadNotConnected);
-    c.disconnect();  // twice is fine
+    c.disconnect();           // twice is fine
     c.connect(server.url());  // and again
     EXPECT_EQ(c.readValue(kInt32), Variant(Int32{7}));
     // connect() while connected replaces the connection.
@@ -387,7 +387,8 @@ TEST_F(ClientFake, DefaultDeadlineIsTheConfiguredRequestTimeout) {
     std::size_t reads = server.count<ReadRequest>();
     EXPECT_EQ(statusOf([&] { c.readValue(kInt32, Clock::now() - 1s); }), status::BadTimeout);
     std::optional<Result<Variant>> got;
-    c.readValueAsync(kInt32, [&](Result<Variant> r) { got = std::move(r); }, Clock::now() - 1s);
+    c.readValueAsync(
+        kInt32, [&](Result<Variant> r) { got = std::move(r); }, Clock::now() - 1s);
     ASSERT_TRUE(got);
     EXPECT_EQ(got->status(), status::BadTimeout);
     EXPECT_EQ(server.count<ReadRequest>(), reads);
@@ -601,7 +602,8 @@ TEST_F(ClientFake, AsyncTimeout) {
     c.connect(server.url());
     std::optional<Result<Variant>> got;
     auto t0 = Clock::now();
-    c.readValueAsync(kInt32, [&](Result<Variant> r) { got = std::move(r); }, 80ms);
+    c.readValueAsync(
+        kInt32, [&](Result<Variant> r) { got = std::move(r); }, 80ms);
     for (int i = 0; i < 100 && !got; ++i) c.runIterate(20ms);
     ASSERT_TRUE(got);
     EXPECT_EQ(got->status(), status::BadTimeout);

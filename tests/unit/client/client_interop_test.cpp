@@ -2,11 +2,10 @@
 // once for the whole program as a child process. Skipped (not failed) only when `node` or the
 // script is missing.
 #include <arpa/inet.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
-
-#include <gtest/gtest.h>
 
 #include <chrono>
 #include <cmath>
@@ -46,7 +45,7 @@ UInt16 freePort() {
 
 // Starts the node-opcua server once for all tests.
 class NodeServer : public ::testing::Environment {
-public:
+  public:
     void SetUp() override {
         std::string node = pnp::testing::findInPath("node");
         std::string script = std::string(PNP_SOURCE_DIR) + "/tests/interop/node_server.js";
@@ -64,13 +63,13 @@ public:
                           std::to_string(::getpid()) + ".log";
         if (!process_.start({node, script, std::to_string(port)}, log, error_) ||
             !process_.waitForLine("READY", 90s, error_)) {
-            error_ = "node_server.js did not start: " + error_ + "\n--- log ---\n" +
-                     process_.logTail();
+            error_ =
+                "node_server.js did not start: " + error_ + "\n--- log ---\n" + process_.logTail();
             process_.stop();
             return;
         }
-        std::printf("[ interop  ] node-opcua server pid %d on %s\n", static_cast<int>(process_.pid()),
-                    url_.c_str());
+        std::printf("[ interop  ] node-opcua server pid %d on %s\n",
+                    static_cast<int>(process_.pid()), url_.c_str());
         ready_ = true;
     }
     void TearDown() override { process_.stop(); }
@@ -80,7 +79,7 @@ public:
     const std::string& error() const { return error_; }
     const std::string& url() const { return url_; }
 
-private:
+  private:
     pnp::testing::ChildProcess process_;
     std::string url_;
     std::string skipReason_;
@@ -101,7 +100,7 @@ StatusCode statusOf(F&& f) {
 }
 
 class Interop : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override {
         if (!g_server->skipReason().empty()) GTEST_SKIP() << g_server->skipReason();
         ASSERT_TRUE(g_server->ready()) << g_server->error();
@@ -173,15 +172,15 @@ std::vector<DemoValue> demoValues() {
     v.push_back({"Double", Double{M_PI}, std::vector<Double>{1.5, -1e300, 6.02214076e23}});
     v.push_back({"String", String("h\u00e9llo \u2713 pnp"),
                  std::vector<String>{"a", "", "\u00fc\u00f1\u00ed"}});
-    v.push_back({"DateTime", iso("2024-05-06T07:08:09.123Z"),
-                 std::vector<DateTime>{iso("2001-01-01T00:00:00.000Z"),
-                                       iso("2030-12-31T23:59:59.999Z")}});
+    v.push_back(
+        {"DateTime", iso("2024-05-06T07:08:09.123Z"),
+         std::vector<DateTime>{iso("2001-01-01T00:00:00.000Z"), iso("2030-12-31T23:59:59.999Z")}});
     v.push_back({"Guid", guid("72962B91-FA75-4AE6-8D28-B404DC7DAF63"),
                  std::vector<Guid>{guid("00000000-0000-0000-0000-000000000001"),
                                    guid("0123ABCD-4567-89EF-0123-456789ABCDEF")}});
-    v.push_back({"ByteString", bytes({0x00, 0x01, 0x02, 0xfe, 0xff}),
-                 std::vector<ByteString>{ByteString("abc"), bytes({0}),
-                                         bytes({0xde, 0xad, 0xbe, 0xef})}});
+    v.push_back(
+        {"ByteString", bytes({0x00, 0x01, 0x02, 0xfe, 0xff}),
+         std::vector<ByteString>{ByteString("abc"), bytes({0}), bytes({0xde, 0xad, 0xbe, 0xef})}});
     v.push_back({"XmlElement", XmlElement{"<pnp a=\"1\">demo</pnp>"},
                  std::vector<XmlElement>{XmlElement{"<a/>"}, XmlElement{"<b>x</b>"}}});
     v.push_back({"NodeId", nodeId("ns=1;s=pnp.Scalar"),
@@ -191,14 +190,14 @@ std::vector<DemoValue> demoValues() {
     v.push_back({"ExpandedNodeId", ExpandedNodeId(NodeId(0, 1234), "urn:pnp:other", 0),
                  std::vector<ExpandedNodeId>{ExpandedNodeId(NodeId(0, 85)),
                                              ExpandedNodeId(NodeId(1, "x.y"), "", 2)}});
-    v.push_back({"StatusCode", status::BadOutOfRange,
-                 std::vector<StatusCode>{StatusCode{}, status::UncertainInitialValue,
-                                         status::BadTimeout}});
+    v.push_back(
+        {"StatusCode", status::BadOutOfRange,
+         std::vector<StatusCode>{StatusCode{}, status::UncertainInitialValue, status::BadTimeout}});
     v.push_back({"QualifiedName", QualifiedName{1, "Qn"},
                  std::vector<QualifiedName>{QualifiedName{0, "A"}, QualifiedName{1, "B"}}});
-    v.push_back({"LocalizedText", LocalizedText("en-US", "hello"),
-                 std::vector<LocalizedText>{LocalizedText("de", "hallo"),
-                                            LocalizedText("", "no locale")}});
+    v.push_back(
+        {"LocalizedText", LocalizedText("en-US", "hello"),
+         std::vector<LocalizedText>{LocalizedText("de", "hallo"), LocalizedText("", "no locale")}});
     v.push_back({"ExtensionObject", toExtensionObject(Range{-1.5, 99.25}),
                  std::vector<ExtensionObject>{toExtensionObject(Range{0, 1}),
                                               toExtensionObject(Range{-10, 10})}});
@@ -328,8 +327,8 @@ TEST_F(Interop, TranslateBrowsePaths) {
     EXPECT_EQ(c.resolve("/Objects/Server.ServerStatus.CurrentTime"),
               NodeId(0, ns0::Server_ServerStatus_CurrentTime));
     EXPECT_EQ(c.resolve("/Objects/urn:pnp:demo:Demo"), NodeId(demo, "Demo"));
-    std::string path = "/Objects/" + std::to_string(demo) + ":Demo/" + std::to_string(demo) +
-                       ":Scalar&.Int32";
+    std::string path =
+        "/Objects/" + std::to_string(demo) + ":Demo/" + std::to_string(demo) + ":Scalar&.Int32";
     EXPECT_EQ(c.resolve(path), NodeId(demo, "Scalar.Int32"));
     EXPECT_EQ(c.resolve(NodeId(0, ns0::Server), "ServerStatus/BuildInfo"),
               NodeId(0, ns0::Server_ServerStatus_BuildInfo));
@@ -413,8 +412,7 @@ TEST_F(Interop, WriteAndReadBackEveryArray) {
         NodeId id(demo, "Array." + d.type);
         EXPECT_EQ(c.writeValue(id, d.array), StatusCode{});
         Variant back = c.readValue(id);
-        EXPECT_EQ(back, d.array) << "wrote " << d.array.toString() << "\nread  "
-                                 << back.toString();
+        EXPECT_EQ(back, d.array) << "wrote " << d.array.toString() << "\nread  " << back.toString();
     }
 }
 
@@ -455,8 +453,8 @@ TEST_F(Interop, CallEchoAndAdd) {
     ASSERT_TRUE(add.ok()) << add.status.toString();
     ASSERT_EQ(add.outputs.size(), 1u);
     EXPECT_EQ(add.outputs[0], Variant(Int32{5}));
-    CallResult wrap = c.call(obj, NodeId(demo, "Demo.Add"),
-                             {Int32{std::numeric_limits<Int32>::max()}, Int32{1}});
+    CallResult wrap =
+        c.call(obj, NodeId(demo, "Demo.Add"), {Int32{std::numeric_limits<Int32>::max()}, Int32{1}});
     EXPECT_EQ(wrap.outputs.at(0), Variant(Int32{std::numeric_limits<Int32>::min()}));
 
     // Wrong types: a Bad status in the result, not an exception.

@@ -2,12 +2,11 @@
 // one that accepts and drops the connection, a closed port. Deadlines must hold and the
 // client must stay usable.
 #include <arpa/inet.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
-
-#include <gtest/gtest.h>
 
 #include <atomic>
 #include <chrono>
@@ -24,7 +23,7 @@ using namespace std::chrono_literals;
 
 // A listening socket on 127.0.0.1 that never accepts (the kernel completes the handshake).
 class SilentListener {
-public:
+  public:
     SilentListener() {
         fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
         sockaddr_in a{};
@@ -41,14 +40,14 @@ public:
     int fd() const { return fd_; }
     std::string url() const { return "opc.tcp://127.0.0.1:" + std::to_string(port_); }
 
-private:
+  private:
     int fd_ = -1;
     UInt16 port_ = 0;
 };
 
 // Accepts connections and closes them at once (after reading the first bytes).
 class DroppingListener {
-public:
+  public:
     DroppingListener() {
         thread_ = std::thread([this] {
             while (!stop_) {
@@ -58,7 +57,8 @@ public:
                 if (c < 0) continue;
                 char buf[256];
                 pollfd q{c, POLLIN, 0};
-                if (::poll(&q, 1, 500) > 0) [[maybe_unused]] auto n = ::read(c, buf, sizeof buf);
+                if (::poll(&q, 1, 500) > 0) [[maybe_unused]]
+                    auto n = ::read(c, buf, sizeof buf);
                 ::close(c);
                 ++accepted_;
             }
@@ -71,7 +71,7 @@ public:
     std::string url() const { return listener_.url(); }
     int accepted() const { return accepted_; }
 
-private:
+  private:
     SilentListener listener_;
     std::atomic<bool> stop_{false};
     std::atomic<int> accepted_{0};

@@ -24,7 +24,7 @@
 namespace pnp::ua::testing {
 
 class FakeServer : public transport::ServiceHandler {
-public:
+  public:
     // One received request, as a hook sees it.
     struct Request {
         std::shared_ptr<transport::ServerConnection> conn;
@@ -183,7 +183,7 @@ public:
         std::erase(connections_, conn);
     }
 
-private:
+  private:
     struct Session {
         NodeId id;
         bool active = false;
@@ -260,7 +260,8 @@ inline void FakeServer::handleDefault(const Request& r) {
         if (auto a = fromExtensionObject<AnonymousIdentityToken>(req.userIdentityToken)) {
             if (a->policyId != kAnonymousPolicy) s = st::BadIdentityTokenInvalid;
         } else if (auto u = fromExtensionObject<UserNameIdentityToken>(req.userIdentityToken)) {
-            if (u->policyId != kUserPolicy) s = st::BadIdentityTokenInvalid;
+            if (u->policyId != kUserPolicy)
+                s = st::BadIdentityTokenInvalid;
             else if (u->userName != "operator" || u->password.bytes != "secret")
                 s = st::BadUserAccessDenied;
         } else {
@@ -333,9 +334,8 @@ inline void FakeServer::handleDefault(const Request& r) {
                     res.inputArgumentResults.push_back(a.scalar<Int32>() ? StatusCode{}
                                                                          : st::BadTypeMismatch);
             } else {
-                res.outputArguments.push_back(
-                    Variant(Int32(*m.inputArguments[0].scalar<Int32>() +
-                                  *m.inputArguments[1].scalar<Int32>())));
+                res.outputArguments.push_back(Variant(Int32(*m.inputArguments[0].scalar<Int32>() +
+                                                            *m.inputArguments[1].scalar<Int32>())));
             }
             resp.results.push_back(std::move(res));
         }
@@ -359,8 +359,8 @@ inline void FakeServer::handleDefault(const Request& r) {
                 rd.browseName = QualifiedName{1, "Ref" + std::to_string(i)};
                 br.references.push_back(std::move(rd));
             }
-            if (to < total) br.continuationPoint = ByteString(std::to_string(to) + "|" +
-                                                              std::to_string(max));
+            if (to < total)
+                br.continuationPoint = ByteString(std::to_string(to) + "|" + std::to_string(max));
             return br;
         };
         if (r.is<BrowseRequest>()) {
@@ -394,8 +394,7 @@ inline void FakeServer::handleDefault(const Request& r) {
         for (const auto& p : req.browsePaths) {
             BrowsePathResult res{};
             std::string joined;
-            for (const auto& e : p.relativePath.elements)
-                joined += "/" + e.targetName.toString();
+            for (const auto& e : p.relativePath.elements) joined += "/" + e.targetName.toString();
             if (p.startingNode == NodeId(0, 84) && joined == "/Objects/Server/ServerStatus") {
                 BrowsePathTarget t{};
                 t.targetId = ExpandedNodeId(NodeId(0, 2256));
