@@ -59,6 +59,8 @@ struct Options {
     std::string jsonPath;
     std::string sections = "abcd";
     bool quiet = false;
+    bool skipRaw = false;  // profiling: OPC UA round trips only
+    int realtimeMode = -1;  // -1 auto, 0 off, 1 on
 };
 
 void usage() {
@@ -331,7 +333,7 @@ RttRow measureSize(std::size_t n, const Options& o, RawClient& raw, const UaOp& 
     ua::ByteString value = payload(n, seed);
     raw.prepare(n, seed);
     for (std::size_t i = 0; i < o.warmup; ++i) {
-        raw.roundTrip(i == 0);
+        if (!o.skipRaw) raw.roundTrip(i == 0);
         uaOp(value, i == 0);
     }
     std::vector<double> uaNs, rawNs;
@@ -340,7 +342,8 @@ RttRow measureSize(std::size_t n, const Options& o, RawClient& raw, const UaOp& 
     // Alternate blocks so that both see the same machine state (other load, frequency).
     while (uaNs.size() < o.iterations) {
         std::size_t k = std::min(o.block, o.iterations - uaNs.size());
-        for (std::size_t i = 0; i < k; ++i) rawNs.push_back(raw.roundTrip(i == 0));
+        if (!o.skipRaw)
+            for (std::size_t i = 0; i < k; ++i) rawNs.push_back(raw.roundTrip(i == 0));
         for (std::size_t i = 0; i < k; ++i) uaNs.push_back(uaOp(value, i == 0));
     }
     for (auto* v : {&uaNs, &rawNs})
@@ -374,7 +377,7 @@ struct Results {
     std::vector<RttRow> write, call;
     std::string rttServer;
     // (c)
-    Summary inproc, exec, premain, connect, read, cli;
+    Summary inproc, exec, premain, connect, read, cli, floorMain;
     bool haveStart = false, haveCli = false;
     // (d)
     struct Idle {
@@ -464,6 +467,7 @@ int run(Options o) {
     const std::string echoExe = o.helperDir + "/pnp_bench_echo_server";
     const std::string benchServerExe = o.helperDir + "/pnp_bench_server";
     const std::string firstReadExe = o.helperDir + "/pnp_bench_first_read";
+    const std::string emptyExe = o.helperDir + "/pnp_bench_empty";
 
     std::vector<ServerKind> kinds;
     if (executable(o.pnpExe))
@@ -568,30 +572,42 @@ int run(Options o) {
 
         if (o.sections.find('c') != std::string::npos) {
             client.disconnect();  // the server is idle again (one session less)
-            std::vector<double> inproc, exec, premain, conn, rd, cli;
+            std::vector<double> inproc, exec, premain, conn, rd, cli, floorMain;
             const std::string nsText = std::to_string(ns);
-            for (std::size_t i = 0; i < o.startRuns + 2; ++i) {  // 2 untimed runs: page cache
-                Spawned s = spawnProcess({firstReadExe, url, nsText, "Scalar.Int32"}, o.clientCpu,
-                                         o.realtime, "");
+            // One timed start of `argv` (which prints "main=.. connected=.. read=.."); the
+            // timestamps are CLOCK_MONOTONIC, the same clock as ours.
+            struct Times {
+                std::int64_t spawn, main, connected, read;
+            };
+            auto timedStart = [&](const std::vector<std::string>& argv) {
+                Spawned s = spawnProcess(argv, o.clientCpu, o.realtime, "");
                 auto line = readLine(s.out, 10s);
                 int st = waitExit(s.pid, 10s);
                 if (st == -1) {
                     stopProcess(s);
-                    throw std::runtime_error("pnp_bench_first_read did not exit within 10 s");
+                    throw std::runtime_error(argv[0] + " did not exit within 10 s");
                 }
                 unregisterChild(s.pid);
                 ::close(s.out);
                 long long tMain = 0, tConn = 0, tRead = 0;
-                if (!line || std::sscanf(line->c_str(), "main=%lld connected=%lld read=%lld", &tMain,
-                                         &tConn, &tRead) != 3 ||
+                if (!line ||
+                    std::sscanf(line->c_str(), "main=%lld connected=%lld read=%lld", &tMain, &tConn,
+                                &tRead) != 3 ||
                     !WIFEXITED(st) || WEXITSTATUS(st) != 0)
-                    throw std::runtime_error("pnp_bench_first_read failed");
+                    throw std::runtime_error(argv[0] + " failed");
+                return Times{s.spawnNs, tMain, tConn, tRead};
+            };
+            // Interleaved with the client runs so that both see the same machine state.
+            for (std::size_t i = 0; i < o.startRuns + 2; ++i) {  // 2 untimed runs: page cache
+                Times t = timedStart({firstReadExe, url, nsText, "Scalar.Int32"});
+                Times f = timedStart({emptyExe});
                 if (i < 2) continue;
-                inproc.push_back(static_cast<double>(tRead - tMain) / 1000.0);
-                exec.push_back(static_cast<double>(tRead - s.spawnNs) / 1000.0);
-                premain.push_back(static_cast<double>(tMain - s.spawnNs) / 1000.0);
-                conn.push_back(static_cast<double>(tConn - tMain) / 1000.0);
-                rd.push_back(static_cast<double>(tRead - tConn) / 1000.0);
+                inproc.push_back(static_cast<double>(t.read - t.main) / 1000.0);
+                exec.push_back(static_cast<double>(t.read - t.spawn) / 1000.0);
+                premain.push_back(static_cast<double>(t.main - t.spawn) / 1000.0);
+                conn.push_back(static_cast<double>(t.connected - t.main) / 1000.0);
+                rd.push_back(static_cast<double>(t.read - t.connected) / 1000.0);
+                floorMain.push_back(static_cast<double>(f.main - f.spawn) / 1000.0);
             }
             if (executable(o.pnpExe)) {
                 std::string node = "ns=" + nsText + ";s=Scalar.Int32";
@@ -619,6 +635,7 @@ int run(Options o) {
             res.inproc = summarize(inproc);
             res.exec = summarize(exec);
             res.premain = summarize(premain);
+            res.floorMain = summarize(floorMain);
             res.connect = summarize(conn);
             res.read = summarize(rd);
             res.haveStart = true;
@@ -638,6 +655,7 @@ int run(Options o) {
             rowc("  of which the Read", res.read, false);
             rowc("spawn (posix_spawn) -> Read done", res.exec, true);
             rowc("  of which spawn -> top of main() (exec, ld.so, init)", res.premain, false);
+            rowc("floor: empty C++ program, spawn -> top of main()", res.floorMain, false);
             if (res.haveCli) rowc("`pnp ua read` CLI: spawn -> exit (informational)", res.cli, false);
             std::fflush(stdout);
         }
@@ -736,6 +754,7 @@ int run(Options o) {
     if (res.haveStart) {
         j += ",\"first_read_us\":{\"in_process\":" + summaryJson(res.inproc) +
              ",\"spawn\":" + summaryJson(res.exec) + ",\"spawn_to_main\":" + summaryJson(res.premain) +
+             ",\"empty_program_spawn_to_main\":" + summaryJson(res.floorMain) +
              ",\"connect\":" + summaryJson(res.connect) + ",\"read\":" + summaryJson(res.read);
         if (res.haveCli) j += ",\"pnp_ua_read_cli_spawn_to_exit\":" + summaryJson(res.cli);
         j += "}";
@@ -824,6 +843,8 @@ int main(int argc, char** argv) {
                 o.jsonPath = next();
             } else if (a == "--pnp") {
                 o.pnpExe = next();
+            } else if (a == "--skip-raw") {
+                o.skipRaw = true;
             } else if (a == "--quiet") {
                 o.quiet = true;
             } else {

@@ -102,8 +102,7 @@ void checkResponse(const Buffer& m) {
         BinaryDecoder d(p, n);
         NodeId type;
         decode(d, type);
-        check(type.namespaceIndex() == 0 && type.isNumeric(), "response type",
-              type.toString());
+        check(type.namespaceIndex() == 0 && type.isNumeric(), "response type", type.toString());
         const DataTypeCodec* codec = findCodecByEncodingId(type.numeric());
         check(codec != nullptr, "response type without codec", type.toString());
         const std::size_t prefix = n - d.remaining();
@@ -111,8 +110,7 @@ void checkResponse(const Buffer& m) {
         BinaryEncoder e(again);
         codec->reencode(d, e);
         check(d.remaining() == 0, "trailing bytes after the response", type.toString());
-        check(again.size() == n - prefix &&
-                  std::equal(again.begin(), again.end(), p + prefix),
+        check(again.size() == n - prefix && std::equal(again.begin(), again.end(), p + prefix),
               "response does not re-encode to the same bytes", type.toString());
     } catch (const DecodeError& e) {
         pnp::fuzz::fail("the server's response does not decode", e.what());
@@ -171,9 +169,9 @@ class Accounting {
         check(responses_ <= requests_, "more responses than requests");
     }
     void checkBalanced() const {
-        check(responses_ == requests_, "a request was not answered",
-              std::to_string(requests_) + " requests, " + std::to_string(responses_) +
-                  " responses");
+        check(
+            responses_ == requests_, "a request was not answered",
+            std::to_string(requests_) + " requests, " + std::to_string(responses_) + " responses");
     }
 
   private:
@@ -214,8 +212,7 @@ class DirectConnection final : public tp::ServerConnection {
 };
 
 // Behind a sans-I/O ServerChannel, like TcpServerConnection without the socket.
-class ChannelConnection final : public tp::ServerConnection,
-                                private tp::ServerChannel::Hooks {
+class ChannelConnection final : public tp::ServerConnection, private tp::ServerChannel::Hooks {
   public:
     ChannelConnection(const tp::ServerTransportConfig& config, tp::TimePoint now)
         : channel_(config, *this, now) {}
@@ -338,8 +335,7 @@ Buffer openChunk(UInt32 channelId, UInt32 seq, UInt32 requestId, SecurityTokenRe
 // A request (type NodeId + body) as MSG chunks of at most maxChunk bytes on channel 1,
 // token 1.
 Buffer msgChunks(const Buffer& typeAndBody, UInt32 requestId, tp::SequenceGenerator& seq,
-                 std::size_t maxChunk = 8192,
-                 tp::MessageType type = tp::MessageType::Message) {
+                 std::size_t maxChunk = 8192, tp::MessageType type = tp::MessageType::Message) {
     Buffer m = tp::newMessageBuffer();
     m.insert(m.end(), typeAndBody.begin(), typeAndBody.end());
     tp::writeSymmetricChunks(m, type, kChannelId, 1, requestId, seq, maxChunk);
@@ -373,14 +369,13 @@ Harness::Harness() {
     auto& as = server->addressSpace();
     // A method completed after the request returned (at the end of the input), and one whose
     // completion is dropped (the address space answers BadInternalError).
-    as.addMethod(NodeId(ns, "Demo"), NodeId(ns, "Fuzz.Deferred"), QualifiedName{ns, "Deferred"},
-                 {}, {},
+    as.addMethod(NodeId(ns, "Demo"), NodeId(ns, "Fuzz.Deferred"), QualifiedName{ns, "Deferred"}, {},
+                 {},
                  [this](const server::MethodCallContext&, std::vector<Variant>,
                         server::MethodCompletion done) { deferred.push_back(std::move(done)); });
-    as.addMethod(NodeId(ns, "Demo"), NodeId(ns, "Fuzz.Forget"), QualifiedName{ns, "Forget"}, {},
-                 {},
-                 [](const server::MethodCallContext&, std::vector<Variant>,
-                    server::MethodCompletion) {});
+    as.addMethod(
+        NodeId(ns, "Demo"), NodeId(ns, "Fuzz.Forget"), QualifiedName{ns, "Forget"}, {}, {},
+        [](const server::MethodCallContext&, std::vector<Variant>, server::MethodCompletion) {});
 
     // The transport settings of the fake connections: small buffers and limits, so that
     // the fuzzer reaches chunking and the limits with small inputs.

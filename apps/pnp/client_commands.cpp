@@ -227,13 +227,16 @@ std::optional<BuiltinType> ns0BuiltinType(UInt32 id) {
 
 // The built-in type that carries values of DataType `dataType`: known ids directly, others by
 // following HasSubtype upwards. The abstract Number / Integer / UInteger take the type of
-// `current` when it has one.
-BuiltinType builtinTypeOf(uac::Client& c, NodeId dataType, const Variant& current) {
+// `current` when it has one (a Variable's value), or are Variants (a structure field).
+enum class AbstractNumbers { FromValue, AsVariant };
+BuiltinType builtinTypeOf(uac::Client& c, NodeId dataType, const Variant& current,
+                          AbstractNumbers numbers = AbstractNumbers::FromValue) {
     for (int hop = 0; hop < 32; ++hop) {
         if (dataType.namespaceIndex() == 0 && dataType.isNumeric()) {
             UInt32 id = dataType.numeric();
             if (auto t = ns0BuiltinType(id)) return *t;
             if (id == ns0::Number || id == ns0::Integer || id == ns0::UInteger) {
+                if (numbers == AbstractNumbers::AsVariant) return BuiltinType::Variant;
                 if (!current.isEmpty() && current.type() != BuiltinType::Variant)
                     return current.type();
                 return id == ns0::Number    ? BuiltinType::Double
@@ -315,9 +318,58 @@ std::vector<std::string> splitList(const std::string& s) {
     return out;
 }
 
-ParseOptions parseOptionsFor(uac::Client& c) {
+// DataType descriptions from the server (DataTypeDefinition, IsAbstract, HasSubtype), so that
+// structures given as JSON can be encoded.
+class ServerTypeCatalog final : public TypeCatalog {
+  public:
+    explicit ServerTypeCatalog(uac::Client& c) : c_(c) {}
+
+    DataTypeDescription describe(const NodeId& dataType) override {
+        DataTypeDescription d;
+        d.builtin = builtinTypeOf(c_, dataType, {}, AbstractNumbers::AsVariant);
+        if (d.builtin != BuiltinType::ExtensionObject && d.builtin != BuiltinType::Int32) return d;
+        if (dataType.namespaceIndex() == 0 && dataType.isNumeric() &&
+            dataType.numeric() <= ns0::Enumeration)
+            return d;  // built-in and abstract base types have no definition
+        std::vector<ReadValueId> req(2);
+        req[0].nodeId = req[1].nodeId = dataType;
+        req[0].attributeId = static_cast<UInt32>(AttributeId::DataTypeDefinition);
+        req[1].attributeId = static_cast<UInt32>(AttributeId::IsAbstract);
+        auto res = c_.read(req, TimestampsToReturn::Neither);
+        if (res.size() != 2 || !res[0].value) return d;
+        const Boolean* isAbstract = res[1].value ? res[1].value->scalar<Boolean>() : nullptr;
+        if (const auto* x = res[0].value->scalar<ExtensionObject>()) {
+            if (auto sd = fromExtensionObject<StructureDefinition>(*x)) {
+                if (d.builtin == BuiltinType::ExtensionObject && !(isAbstract && *isAbstract))
+                    d.structure = std::move(*sd);
+            } else if (auto ed = fromExtensionObject<EnumDefinition>(*x)) {
+                d.enumeration = std::move(*ed);
+            }
+        }
+        return d;
+    }
+
+    NodeId dataTypeOfEncoding(const NodeId& encodingId) override {
+        BrowseDescription b;
+        b.nodeId = encodingId;
+        b.browseDirection = BrowseDirection::Inverse;
+        b.referenceTypeId = NodeId(0, ns0::HasEncoding);
+        b.includeSubtypes = false;
+        b.resultMask = 0x3F;
+        BrowseResult r = c_.browse(b);
+        if (r.statusCode.isBad() || r.references.empty() || !r.references[0].nodeId.isLocal())
+            return {};
+        return r.references[0].nodeId.nodeId;
+    }
+
+  private:
+    uac::Client& c_;
+};
+
+ParseOptions parseOptionsFor(uac::Client& c, TypeCatalog& types) {
     ParseOptions p;
     p.namespaceIndex = [&c](std::string_view uri) { return c.namespaceIndex(uri); };
+    p.types = &types;
     return p;
 }
 
@@ -559,7 +611,9 @@ int runWrite(const ClientOptions& o, const WriteOptions& w) {
         const Variant current = res[2].value ? *res[2].value : Variant();
         type = {builtinTypeOf(*client, *dt, current), shapeOfValueRank(*rank)};
     }
-    Variant value = parseValue(w.value, type->first, type->second, parseOptionsFor(*client));
+    ServerTypeCatalog catalog(*client);
+    Variant value =
+        parseValue(w.value, type->first, type->second, parseOptionsFor(*client, catalog));
     StatusCode st = client->writeValue(id, value);
     if (o.json) {
         printJson({{"node", w.node},
@@ -648,7 +702,8 @@ int runCall(const ClientOptions& o, const CallOptions& c) {
     auto [inArgs, outArgs] = methodArguments(*client, method);
 
     std::vector<Variant> inputs;
-    ParseOptions po = parseOptionsFor(*client);
+    ServerTypeCatalog catalog(*client);
+    ParseOptions po = parseOptionsFor(*client, catalog);
     if (!explicitTypes.empty()) {
         for (std::size_t i = 0; i < c.args.size(); ++i)
             inputs.push_back(

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <type_traits>
 #include <variant>
 #include <vector>
@@ -250,7 +251,9 @@ Variant inferFromJson(const json& j, const ParseOptions& opt);
 Variant variantFromJson(const json& j, const ParseOptions& opt);
 DataValue dataValueFromJson(const json& j, const ParseOptions& opt);
 DiagnosticInfo diagnosticInfoFromJson(const json& j, const ParseOptions& opt);
-ExtensionObject extensionObjectFromJson(const json& j);
+ExtensionObject extensionObjectFromJson(const json& j, const ParseOptions& opt);
+template <class T>
+T scalarFromJson(const json& j, const ParseOptions& opt);
 LocalizedText localizedTextFromJson(const json& j);
 
 json parseJsonText(BuiltinType t, std::string_view text) {
@@ -320,6 +323,9 @@ T parseScalar(std::string_view text, const ParseOptions& opt) {
     } else if constexpr (std::is_same_v<T, StatusCode>) {
         std::string_view s = trim(text);
         if (auto c = statusCodeFromName(s)) return *c;
+        // "BadTimeout (0x800A0000)", the form of StatusCode::toString()
+        if (auto open = s.find(" (0x"); open != std::string_view::npos && s.ends_with(")"))
+            return StatusCode{parseInteger<UInt32>(s.substr(open + 2, s.size() - open - 3))};
         if (!s.empty() && (std::isdigit(static_cast<unsigned char>(s[0]))))
             return StatusCode{parseInteger<UInt32>(s)};
         fail(bt, text, "expected a status name (BadTimeout) or number (0x800A0000)");
@@ -342,7 +348,7 @@ T parseScalar(std::string_view text, const ParseOptions& opt) {
         }
         return LocalizedText("", std::string(text));
     } else if constexpr (std::is_same_v<T, ExtensionObject>) {
-        return extensionObjectFromJson(parseJsonText(bt, text));
+        return extensionObjectFromJson(parseJsonText(bt, text), opt);
     } else if constexpr (std::is_same_v<T, DataValue>) {
         return dataValueFromJson(parseJsonText(bt, text), opt);
     } else if constexpr (std::is_same_v<T, DiagnosticInfo>) {
@@ -373,7 +379,7 @@ T scalarFromJson(const json& j, const ParseOptions& opt) {
     } else if constexpr (std::is_same_v<T, DiagnosticInfo>) {
         return diagnosticInfoFromJson(j, opt);
     } else if constexpr (std::is_same_v<T, ExtensionObject>) {
-        return extensionObjectFromJson(j);
+        return extensionObjectFromJson(j, opt);
     } else if constexpr (std::is_same_v<T, LocalizedText>) {
         return localizedTextFromJson(j);
     } else {
@@ -426,13 +432,153 @@ LocalizedText localizedTextFromJson(const json& j) {
     return t;
 }
 
-ExtensionObject extensionObjectFromJson(const json& j) {
+// ---- structures given as JSON -------------------------------------------------------------
+// Encodes {"Low":1,"High":2} as the binary body of a structure, field by field, driven by
+// the DataType's StructureDefinition (Part 6 §5.2.6 - §5.2.8).
+class StructureEncoder {
+  public:
+    StructureEncoder(TypeCatalog& types, const ParseOptions& opt) : types_(types), opt_(opt) {}
+
+    void structure(BinaryEncoder& e, const NodeId& dataType, const StructureDefinition& def,
+                   const json& body) {
+        if (++depth_ > 16) fail(BuiltinType::ExtensionObject, "", "structures nested too deeply");
+        const std::string where = "structure " + dataType.toString();
+        if (!body.is_object())
+            fail(BuiltinType::ExtensionObject, jsonTextForError(body),
+                 where + ": expected an object");
+        // Every key must name a field (typos are errors, not silently default values).
+        for (const auto& [k, v] : body.items())
+            if (field(def, k) == nullptr)
+                fail(BuiltinType::ExtensionObject, jsonTextForError(body),
+                     where + " has no field " + k);
+        const bool subtyped = def.structureType == StructureType::StructureWithSubtypedValues ||
+                              def.structureType == StructureType::UnionWithSubtypedValues;
+        switch (def.structureType) {
+            case StructureType::Union:
+            case StructureType::UnionWithSubtypedValues: {
+                if (body.size() > 1)
+                    fail(BuiltinType::ExtensionObject, jsonTextForError(body),
+                         where + " is a union: give one field");
+                UInt32 index = 0;
+                for (UInt32 i = 0; i < def.fields.size(); ++i)
+                    if (!body.empty() && value(body, def.fields[i].name) != nullptr) index = i + 1;
+                e.number<UInt32>(index);
+                if (index != 0)
+                    fieldValue(e, def.fields[index - 1], *value(body, def.fields[index - 1].name),
+                               subtyped);
+                break;
+            }
+            case StructureType::StructureWithOptionalFields: {
+                UInt32 mask = 0, bit = 0;
+                for (const auto& f : def.fields) {
+                    if (!f.isOptional) continue;
+                    const json* v = value(body, f.name);
+                    if (v != nullptr && !v->is_null()) mask |= 1u << bit;
+                    ++bit;
+                }
+                e.number<UInt32>(mask);
+                for (const auto& f : def.fields) {
+                    const json* v = value(body, f.name);
+                    if (f.isOptional && (v == nullptr || v->is_null())) continue;
+                    fieldValue(e, f, v == nullptr ? json() : *v, false);
+                }
+                break;
+            }
+            default:
+                for (const auto& f : def.fields) {
+                    const json* v = value(body, f.name);
+                    fieldValue(e, f, v == nullptr ? json() : *v, subtyped && f.isOptional);
+                }
+        }
+        --depth_;
+    }
+
+    const DataTypeDescription& describe(const NodeId& dataType) {
+        auto it = cache_.find(dataType);
+        if (it == cache_.end()) it = cache_.emplace(dataType, types_.describe(dataType)).first;
+        return it->second;
+    }
+
+  private:
+    static const StructureField* field(const StructureDefinition& def, std::string_view key) {
+        for (const auto& f : def.fields)
+            if (f.name == key) return &f;
+        for (const auto& f : def.fields)
+            if (lower(f.name) == lower(key)) return &f;
+        return nullptr;
+    }
+    static const json* value(const json& body, const std::string& name) {
+        if (auto it = body.find(name); it != body.end()) return &*it;
+        for (const auto& [k, v] : body.items())
+            if (lower(k) == lower(name)) return &v;
+        return nullptr;
+    }
+
+    // One field: an array (ValueRank >= 0 : length + elements) or one value.
+    void fieldValue(BinaryEncoder& e, const StructureField& f, const json& v, bool subtyped) {
+        if (f.valueRank >= 0) {
+            if (v.is_null()) {
+                e.number<Int32>(-1);
+                return;
+            }
+            if (!v.is_array())
+                fail(BuiltinType::ExtensionObject, jsonTextForError(v),
+                     "field " + f.name + " is an array");
+            e.number<Int32>(static_cast<Int32>(v.size()));
+            for (const auto& x : v) one(e, f.dataType, x, subtyped, f.name);
+            return;
+        }
+        one(e, f.dataType, v, subtyped, f.name);
+    }
+
+    void one(BinaryEncoder& e, const NodeId& dataType, const json& v, bool subtyped,
+             const std::string& name) {
+        const DataTypeDescription& d = describe(dataType);
+        if (d.structure && !subtyped) {  // a concrete structure is encoded inline
+            structure(e, dataType, *d.structure, v.is_null() ? json::object() : v);
+            return;
+        }
+        if (d.enumeration && v.is_string()) {
+            const std::string& n = v.get_ref<const std::string&>();
+            for (const auto& ef : d.enumeration->fields) {
+                if (ef.name == n || ef.displayName.text == n) {
+                    e.number<Int32>(static_cast<Int32>(ef.value));
+                    return;
+                }
+            }
+        }
+        try {
+            withType(d.builtin, [&](auto tag) {
+                using T = typename decltype(tag)::type;
+                if (v.is_null()) {
+                    encode(e, T{});
+                } else if constexpr (std::is_same_v<T, ExtensionObject>) {
+                    encode(e, extensionObjectFromJson(v, opt_));
+                } else {
+                    encode(e, scalarFromJson<T>(v, opt_));
+                }
+            });
+        } catch (const ValueError& x) {
+            throw ValueError("field " + name + ": " + x.what());
+        }
+    }
+
+    TypeCatalog& types_;
+    const ParseOptions& opt_;
+    std::map<NodeId, DataTypeDescription> cache_;
+    int depth_ = 0;
+};
+
+// {"TypeId":"i=886","Body":"<base64>"}, {"Type":"Range","Body":{...}} or
+// {"TypeId":"i=886","Type":"Range","Body":{...}} (the form toJson prints).
+ExtensionObject extensionObjectFromJson(const json& j, const ParseOptions& opt) {
     constexpr BuiltinType bt = BuiltinType::ExtensionObject;
     if (j.is_null()) return ExtensionObject{};
     if (!j.is_object()) fail(bt, jsonTextForError(j), "expected {\"TypeId\":..,\"Body\":..}");
     ExtensionObject x;
     x.encoding = ExtensionObject::Encoding::Binary;
     const json* body = nullptr;
+    std::string typeName;
     bool haveTypeId = false;
     for (const auto& [k, v] : j.items()) {
         std::string key = lower(k);
@@ -449,18 +595,64 @@ ExtensionObject extensionObjectFromJson(const json& j) {
                 fail(bt, jsonTextForError(j), "Encoding must be Binary or Xml");
         } else if (key == "body") {
             body = &v;
-        } else if (key != "type") {
+        } else if (key == "type" && v.is_string()) {
+            typeName = v.get<std::string>();
+        } else {
             fail(bt, jsonTextForError(j), "unknown field " + k);
         }
+    }
+    if (body != nullptr && (body->is_object() || body->is_array())) {
+        // A decoded structure: encode it from the DataType's definition.
+        if (opt.types == nullptr)
+            fail(bt, jsonTextForError(j),
+                 "a decoded structure needs the DataType's definition (only available "
+                 "against a server); give {\"TypeId\":..,\"Body\":\"<base64>\"} instead");
+        NodeId dataType;
+        if (haveTypeId) {
+            if (x.typeId.namespaceIndex() == 0 && x.typeId.isNumeric())
+                if (const DataTypeCodec* c = findCodecByEncodingId(x.typeId.numeric()))
+                    dataType = NodeId(0, c->dataTypeId);
+            if (dataType.isNull()) dataType = opt.types->dataTypeOfEncoding(x.typeId);
+        } else if (!typeName.empty()) {
+            for (const auto& c : allDataTypeCodecs())
+                if (c.name == typeName) dataType = NodeId(0, c.dataTypeId);
+        }
+        if (dataType.isNull())
+            fail(bt, jsonTextForError(j),
+                 haveTypeId ? "unknown TypeId" : "give TypeId (the encoding node) or a known Type");
+        StructureEncoder enc(*opt.types, opt);
+        const DataTypeDescription& d = enc.describe(dataType);
+        if (!d.structure)
+            fail(bt, jsonTextForError(j), dataType.toString() + " is not a concrete structure");
+        Buffer buf;
+        BinaryEncoder e(buf);
+        enc.structure(e, dataType, *d.structure, *body);
+        if (!d.structure->defaultEncodingId.isNull()) x.typeId = d.structure->defaultEncodingId;
+        x.encoding = ExtensionObject::Encoding::Binary;
+        x.body.assign(reinterpret_cast<const char*>(buf.data()), buf.size());
+        // Namespace 0: check the result with the generated codec.
+        if (x.typeId.namespaceIndex() == 0 && x.typeId.isNumeric()) {
+            if (const DataTypeCodec* c = findCodecByEncodingId(x.typeId.numeric())) {
+                try {
+                    BinaryDecoder d2(buf.data(), buf.size());
+                    Buffer again;
+                    BinaryEncoder e2(again);
+                    c->reencode(d2, e2);
+                    if (d2.remaining() != 0) throw DecodeError(status::BadDecodingError, "size");
+                } catch (const DecodeError&) {
+                    fail(bt, jsonTextForError(j),
+                         "the encoded structure does not decode as " + std::string(c->name));
+                }
+            }
+        }
+        return x;
     }
     if (!haveTypeId) fail(bt, jsonTextForError(j), "TypeId missing");
     if (body == nullptr || body->is_null()) {
         x.encoding = ExtensionObject::Encoding::None;
         return x;
     }
-    if (!body->is_string())
-        fail(bt, jsonTextForError(j),
-             "give the encoded Body as a base64 string (decoded structures cannot be encoded)");
+    if (!body->is_string()) fail(bt, jsonTextForError(j), "Body must be an object or base64");
     if (x.encoding == ExtensionObject::Encoding::Xml) {
         x.body = body->get<std::string>();
     } else {

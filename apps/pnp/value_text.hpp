@@ -15,7 +15,10 @@
 //   StatusCode       BadTimeout, 0x800A0000, 2148139008
 //   QualifiedName    Name or 1:Name
 //   LocalizedText    hello, "hello"@en-US, {"Locale":"en-US","Text":"hello"}
-//   ExtensionObject  {"TypeId":"i=886","Body":"<base64>"} (binary body as is)
+//   ExtensionObject  {"TypeId":"i=886","Body":"<base64>"} (binary body as is), or decoded
+//                    {"Type":"Range","Body":{"Low":1,"High":2}} / {"TypeId":"i=886","Body":{..}}
+//                    when ParseOptions::types describes the DataType (the CLI asks the
+//                    server for its DataTypeDefinition)
 //   DataValue        {"Value":{"Type":"Double","Body":1.25},"Status":"Good",
 //                     "SourceTimestamp":"2024-01-02T03:04:05.678Z"}
 //   Variant          a JSON value: 1 (Int32), 1.5 (Double), true, "text",
@@ -47,6 +50,7 @@
 #include <utility>
 
 #include "ua/types/builtin.hpp"
+#include "ua/types/ns0_types.hpp"
 
 namespace pnp::cli {
 
@@ -70,9 +74,29 @@ enum class Shape {
 // ValueRank -1 -> Scalar, >= 1 -> Array, anything else (Any, ScalarOrOneDimension, ...) Auto.
 Shape shapeOfValueRank(Int32 valueRank);
 
+// What encoding a decoded structure needs to know about a DataType.
+struct DataTypeDescription {
+    BuiltinType builtin = BuiltinType::Variant;    // how values travel (Int32 for enumerations,
+                                                   // ExtensionObject for structures)
+    std::optional<StructureDefinition> structure;  // a concrete structure: its fields
+    std::optional<EnumDefinition> enumeration;     // an enumeration: names of its values
+};
+
+// Source of DataType descriptions (the CLI's implementation reads them from the server).
+class TypeCatalog {
+  public:
+    virtual ~TypeCatalog() = default;
+    virtual DataTypeDescription describe(const NodeId& dataType) = 0;
+    // The DataType of an encoding node ("Default Binary"); a null NodeId when unknown.
+    virtual NodeId dataTypeOfEncoding(const NodeId& encodingId) = 0;
+};
+
 struct ParseOptions {
     // Resolves the namespace URI of "nsu=..." NodeId values; without it they are refused.
     std::function<UInt16(std::string_view uri)> namespaceIndex;
+    // Describes DataTypes so that decoded structures can be encoded; without it only the
+    // {"TypeId":..,"Body":"<base64>"} form of ExtensionObjects is accepted.
+    TypeCatalog* types = nullptr;
 };
 
 // "Int32" -> {Int32, Auto}, "Int32[]" -> {Int32, Array}; nullopt for an unknown name.

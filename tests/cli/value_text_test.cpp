@@ -265,7 +265,7 @@ TEST(ValueText, ExtensionObjectIsDecodedWhenKnown) {
     EXPECT_EQ(u["Body"], "AQI=");
     expectJsonRoundTrip(Variant(unknown));
     expectJsonRoundTrip(Variant(std::vector<ExtensionObject>{unknown, ExtensionObject{}}));
-    // A decoded body cannot be encoded without the type's description.
+    // A decoded body cannot be encoded without the type's description (see Structures).
     EXPECT_THROW(parse(j.dump(), "ExtensionObject"), ValueError);
 }
 
@@ -339,6 +339,178 @@ TEST(ValueText, ErrorMessagesNameTypeAndText) {
         EXPECT_NE(std::string(e.what()).find("\"300\""), std::string::npos) << e.what();
         EXPECT_NE(std::string(e.what()).find("Byte"), std::string::npos) << e.what();
     }
+}
+
+}  // namespace
+}  // namespace pnp::cli
+
+// ---- structures given as JSON ------------------------------------------------------------
+namespace pnp::cli {
+namespace {
+
+using json = Json;
+
+StructureField field(std::string name, NodeId dataType, Int32 valueRank = -1,
+                     bool optional = false) {
+    StructureField f;
+    f.name = std::move(name);
+    f.dataType = std::move(dataType);
+    f.valueRank = valueRank;
+    f.isOptional = optional;
+    return f;
+}
+
+// A hand-written catalog with the definitions a server would return.
+class FakeCatalog : public TypeCatalog {
+  public:
+    int describeCalls = 0;
+
+    DataTypeDescription describe(const NodeId& t) override {
+        ++describeCalls;
+        DataTypeDescription d;
+        auto structure = [&](UInt32 encoding, StructureType type,
+                             std::vector<StructureField> fields, UInt16 ns = 0) {
+            StructureDefinition s;
+            s.defaultEncodingId = NodeId(ns, encoding);
+            s.baseDataType = NodeId(0, 22);
+            s.structureType = type;
+            s.fields = std::move(fields);
+            d.builtin = BuiltinType::ExtensionObject;
+            d.structure = std::move(s);
+        };
+        if (t.namespaceIndex() == 1) {
+            if (t.numeric() == 5000)  // a union
+                structure(5001, StructureType::Union,
+                          {field("Number", NodeId(0, 6)), field("Text", NodeId(0, 12))}, 1);
+            if (t.numeric() == 6000)  // optional fields
+                structure(6001, StructureType::StructureWithOptionalFields,
+                          {field("Id", NodeId(0, 7)), field("Note", NodeId(0, 12), -1, true),
+                           field("Values", NodeId(0, 11), 1, true)},
+                          1);
+            return d;
+        }
+        switch (t.numeric()) {
+            case 884:  // Range
+                structure(886, StructureType::Structure,
+                          {field("Low", NodeId(0, 11)), field("High", NodeId(0, 11))});
+                break;
+            case 338:  // BuildInfo
+                structure(
+                    340, StructureType::Structure,
+                    {field("ProductUri", NodeId(0, 12)), field("ManufacturerName", NodeId(0, 12)),
+                     field("ProductName", NodeId(0, 12)), field("SoftwareVersion", NodeId(0, 12)),
+                     field("BuildNumber", NodeId(0, 12)), field("BuildDate", NodeId(0, 294))});
+                break;
+            case 862:  // ServerStatusDataType
+                structure(864, StructureType::Structure,
+                          {field("StartTime", NodeId(0, 294)), field("CurrentTime", NodeId(0, 294)),
+                           field("State", NodeId(0, 852)), field("BuildInfo", NodeId(0, 338)),
+                           field("SecondsTillShutdown", NodeId(0, 7)),
+                           field("ShutdownReason", NodeId(0, 21))});
+                break;
+            case 852: {  // ServerState
+                d.builtin = BuiltinType::Int32;
+                EnumDefinition e;
+                for (auto [v, n] :
+                     {std::pair<Int64, const char*>{0, "Running"}, {1, "Failed"}, {7, "Unknown"}}) {
+                    EnumField f;
+                    f.value = v;
+                    f.name = n;
+                    e.fields.push_back(f);
+                }
+                d.enumeration = e;
+                break;
+            }
+            case 294:
+                d.builtin = BuiltinType::DateTime;
+                break;  // UtcTime
+            default:
+                d.builtin = static_cast<BuiltinType>(t.numeric());
+        }
+        return d;
+    }
+    NodeId dataTypeOfEncoding(const NodeId& e) override {
+        if (e == NodeId(1, 5001)) return NodeId(1, 5000);
+        if (e == NodeId(1, 6001)) return NodeId(1, 6000);
+        return {};
+    }
+};
+
+Variant parseWith(TypeCatalog& c, std::string_view text) {
+    ParseOptions o;
+    o.types = &c;
+    return parseValue(text, BuiltinType::ExtensionObject, Shape::Auto, o);
+}
+
+TEST(Structures, DecodedJsonIsEncodedBack) {
+    FakeCatalog cat;
+    Range r;
+    r.low = -1.5;
+    r.high = 99.25;
+    Variant v(toExtensionObject(r));
+    EXPECT_EQ(parseWith(cat, toJson(v).dump()), v);
+    EXPECT_EQ(parseWith(cat, "{\"Type\":\"Range\",\"Body\":{\"Low\":-1.5,\"High\":99.25}}"), v);
+    EXPECT_EQ(parseWith(cat, "{\"TypeId\":\"i=886\",\"Body\":{\"high\":99.25,\"low\":-1.5}}"), v);
+    // Missing fields take their default.
+    Range low;
+    low.low = 1;
+    EXPECT_EQ(parseWith(cat, "{\"Type\":\"Range\",\"Body\":{\"Low\":1}}"),
+              Variant(toExtensionObject(low)));
+    // Arrays of structures.
+    Variant arr(std::vector<ExtensionObject>{toExtensionObject(r), toExtensionObject(low)});
+    EXPECT_EQ(parseWith(cat, toJson(arr).dump()), arr);
+}
+
+TEST(Structures, NestedStructuresAndEnumerationNames) {
+    FakeCatalog cat;
+    ServerStatusDataType s;
+    s.startTime = *parseDateTime("2024-01-02T03:04:05.678Z");
+    s.currentTime = DateTime::now();
+    s.state = ServerState::Unknown;
+    s.buildInfo.productUri = "urn:pnp";
+    s.buildInfo.productName = "pnp";
+    s.buildInfo.buildDate = s.startTime;
+    s.secondsTillShutdown = 7;
+    s.shutdownReason = LocalizedText("en", "maintenance");
+    Variant v(toExtensionObject(s));
+    json j = toJson(v);
+    EXPECT_EQ(j["Body"]["State"], "Unknown") << j.dump();  // enumerations print by name
+    EXPECT_EQ(parseWith(cat, j.dump()), v) << j.dump();
+    // By number too.
+    j["Body"]["State"] = 7;
+    EXPECT_EQ(parseWith(cat, j.dump()), v);
+}
+
+TEST(Structures, UnionsAndOptionalFields) {
+    FakeCatalog cat;
+    auto body = [&](std::string_view text) {
+        Variant v = parseWith(cat, text);
+        return std::get<ExtensionObject>(v.storage()).body;
+    };
+    EXPECT_EQ(body("{\"TypeId\":\"ns=1;i=5001\",\"Body\":{\"Text\":\"x\"}}"),
+              std::string("\x02\0\0\0\x01\0\0\0x", 9));
+    EXPECT_EQ(body("{\"TypeId\":\"ns=1;i=5001\",\"Body\":{}}"), std::string("\0\0\0\0", 4));
+    EXPECT_THROW(body("{\"TypeId\":\"ns=1;i=5001\",\"Body\":{\"Text\":\"x\",\"Number\":1}}"),
+                 ValueError);
+    // Optional fields: mask bit 0 = Note, bit 1 = Values.
+    EXPECT_EQ(body("{\"TypeId\":\"ns=1;i=6001\",\"Body\":{\"Id\":5}}"),
+              std::string("\0\0\0\0\x05\0\0\0", 8));
+    EXPECT_EQ(body("{\"TypeId\":\"ns=1;i=6001\",\"Body\":{\"Id\":5,\"Values\":[]}}"),
+              std::string("\x02\0\0\0\x05\0\0\0\0\0\0\0", 12));
+}
+
+TEST(Structures, Errors) {
+    FakeCatalog cat;
+    // Without a catalog a decoded body cannot be encoded.
+    EXPECT_THROW(parseValue("{\"Type\":\"Range\",\"Body\":{\"Low\":1}}",
+                            BuiltinType::ExtensionObject, Shape::Scalar),
+                 ValueError);
+    EXPECT_THROW(parseWith(cat, "{\"Type\":\"Range\",\"Body\":{\"Lo\":1}}"), ValueError);
+    EXPECT_THROW(parseWith(cat, "{\"Type\":\"Range\",\"Body\":{\"Low\":\"x\"}}"), ValueError);
+    EXPECT_THROW(parseWith(cat, "{\"Type\":\"NoSuchType\",\"Body\":{}}"), ValueError);
+    EXPECT_THROW(parseWith(cat, "{\"TypeId\":\"ns=1;i=999\",\"Body\":{}}"), ValueError);
+    EXPECT_THROW(parseWith(cat, "{\"TypeId\":\"i=864\",\"Body\":{\"State\":\"Dancing\"}}"),
+                 ValueError);
 }
 
 }  // namespace

@@ -25,6 +25,12 @@
 // A value read callback runs on the thread that called read() (usually the network thread):
 // it must be fast and must not block. Long-running methods complete asynchronously (see
 // MethodHandler).
+//
+// Not modelled: RolePermissions, UserRolePermissions and AccessRestrictions (reading them is
+// Bad_AttributeIdInvalid); the User* attributes equal their non-user counterparts (per-user
+// access control belongs to the session layer); a Browse with a View accepts any existing
+// View node but does not restrict the references to it; values are always current (maxAge
+// is accepted and ignored).
 #pragma once
 
 #include <atomic>

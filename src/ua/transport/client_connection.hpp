@@ -52,7 +52,7 @@ struct EndpointUrl {
 // Throws TransportError(BadTcpEndpointUrlInvalid).
 EndpointUrl parseEndpointUrl(const std::string& url);
 
-class ClientConnection : private ClientChannel::Hooks {
+class ClientConnection final : private ClientChannel::Hooks {
   public:
     // TCP connect (name resolution included; getaddrinfo itself is not bounded by the
     // deadline), HEL/ACK, OpenSecureChannel (Issue).
@@ -106,6 +106,7 @@ class ClientConnection : private ClientChannel::Hooks {
     int fd_ = -1;
     Deadline writeDeadline_{};
     std::deque<IncomingResponse> ready_;
+    bool awaitingFirstByte_ = false;  // a request was just sent: poll() before recv()
 };
 
 }  // namespace pnp::ua::transport

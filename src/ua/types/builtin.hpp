@@ -285,7 +285,7 @@ PNP_UA_BUILTIN_OF(DiagnosticInfo, DiagnosticInfo);
 class Variant {
   public:
     Variant() = default;
-    Variant(const char* s) : data_(String(s)) {}  // NOLINT
+    Variant(const char* s);  // NOLINT
     template <class T, class = decltype(BuiltinTypeOf<std::decay_t<T>>::value),
               class = std::enable_if_t<!std::is_same_v<std::decay_t<T>, Variant>>>
     Variant(T&& v) {  // NOLINT: implicit so that `Variant v = 42;` reads naturally
@@ -368,6 +368,9 @@ struct DataValue {
     StatusCode statusOrGood() const { return status.value_or(StatusCode{}); }
     bool operator==(const DataValue&) const = default;
 };
+
+// Out of line: building the storage needs DataValue complete (clang rejects it earlier).
+inline Variant::Variant(const char* s) : data_(String(s)) {}
 
 }  // namespace pnp::ua
 

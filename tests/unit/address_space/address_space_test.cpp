@@ -430,7 +430,8 @@ TEST_F(Instantiation, NamespaceZeroObjectType) {
 
 TEST_F(Instantiation, CustomTypesAndMethodHandlers) {
     const NodeId mandatory = ns0(ns0::ModellingRule_Mandatory);
-    NodeId device = space.addObjectType(ns0(ns0::BaseObjectType), id("DeviceType"), name("DeviceType"));
+    NodeId device =
+        space.addObjectType(ns0(ns0::BaseObjectType), id("DeviceType"), name("DeviceType"));
     VariableAttributes serial;
     serial.dataType = ns0(ns0::String);
     serial.value = DataValue(Variant(String("unknown")));
@@ -439,12 +440,12 @@ TEST_F(Instantiation, CustomTypesAndMethodHandlers) {
     NodeId optional = space.addProperty(device, id("DeviceType.Note"), name("Note"), serial);
     space.addReference(optional, ns0(ns0::HasModellingRule), ns0(ns0::ModellingRule_Optional));
     std::vector<NodeId> resetOn;
-    NodeId resetDecl = space.addMethod(device, id("DeviceType.Reset"), name("Reset"),
-                                       {argument("hard", ns0::Boolean)}, {},
-                                       makeMethodHandler([&](const MethodCallContext& c, auto&, auto&) {
-                                           resetOn.push_back(c.objectId);
-                                           return StatusCode{};
-                                       }));
+    NodeId resetDecl = space.addMethod(
+        device, id("DeviceType.Reset"), name("Reset"), {argument("hard", ns0::Boolean)}, {},
+        makeMethodHandler([&](const MethodCallContext& c, auto&, auto&) {
+            resetOn.push_back(c.objectId);
+            return StatusCode{};
+        }));
     space.addReference(resetDecl, ns0(ns0::HasModellingRule), mandatory);
     NodeId robotType = space.addObjectType(device, id("RobotType"), name("RobotType"));
     VariableAttributes axes;
@@ -482,8 +483,8 @@ TEST_F(Instantiation, CustomTypesAndMethodHandlers) {
     bare.instantiateMandatory = false;
     NodeId r2 = space.addObject(ns0(ns0::ObjectsFolder), id("R2"), name("R2"), bare, robotType);
     EXPECT_FALSE(space.resolvePath(r2, std::vector<QualifiedName>{name("Serial")}).has_value());
-    NodeId r3 = space.addObject(ns0(ns0::ObjectsFolder), NodeId(ns, UInt32{0}), name("R3"), {},
-                                robotType);
+    NodeId r3 =
+        space.addObject(ns0(ns0::ObjectsFolder), NodeId(ns, UInt32{0}), name("R3"), {}, robotType);
     auto s3 = space.resolvePath(r3, std::vector<QualifiedName>{name("Serial")});
     ASSERT_TRUE(s3.has_value());
     EXPECT_TRUE(s3->isNumeric());
