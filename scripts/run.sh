@@ -8,5 +8,5 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$ROOT/scripts/setup.sh"
 bash "$ROOT/scripts/build.sh" release
 PORT="${PNP_PORT:-4840}"
-echo "[run] $ROOT/build/apps/pnp ua serve --port $PORT $*"
-exec "$ROOT/build/apps/pnp" ua serve --port "$PORT" "$@"
+echo "[run] $ROOT/build/apps/pnp/pnp ua serve --port $PORT $*"
+exec "$ROOT/build/apps/pnp/pnp" ua serve --port "$PORT" "$@"

@@ -6,13 +6,13 @@
 #   4. fuzz build (build-fuzz/, clang-19, only the fuzz/ targets), then every libFuzzer
 #      target found there for PNP_FUZZ_SECONDS each (default 60)
 #   5. interop: node-opcua client vs node-opcua server (validates the harness);
-#      node-opcua client vs `build/apps/pnp ua serve`; tshark capture of that run
+#      node-opcua client vs `build/apps/pnp/pnp ua serve`; tshark capture of that run
 # Ends with one line "N passed, N failed, N skipped" (tests, not steps) and exits
 # non-zero if anything failed.
 #
 # Environment:
 #   PNP_FUZZ_SECONDS=60        libFuzzer -max_total_time per target (0 disables fuzzing)
-#   PNP_INTEROP=auto|on|off    auto (default): pnp interop runs when build/apps/pnp
+#   PNP_INTEROP=auto|on|off    auto (default): pnp interop runs when build/apps/pnp/pnp
 #                              exists; on: a missing binary is a failure; off: skip
 #   PNP_SKIP_ASAN=1            skip step 3
 #   PNP_SKIP_SETUP=1           skip step 1
@@ -24,7 +24,7 @@ NPROC="$(nproc)"
 JOBS=$((NPROC < 2 ? 2 : NPROC))
 FUZZ_SECONDS="${PNP_FUZZ_SECONDS:-60}"
 INTEROP="${PNP_INTEROP:-auto}"
-PNP_BIN="$ROOT/build/apps/pnp"
+PNP_BIN="$ROOT/build/apps/pnp/pnp"
 LOGS="$ROOT/build-logs"
 mkdir -p "$LOGS"
 

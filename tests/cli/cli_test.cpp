@@ -470,6 +470,46 @@ TEST_F(CliTest, ReadJsonCanBeWrittenBack) {
     EXPECT_EQ(parseJson(again)["results"][0]["value"], v);
 }
 
+TEST_F(CliTest, WriteDecodedStructures) {
+    // A structure given by its fields (encoded from the server's DataTypeDefinition).
+    Result w = run({"ua", "write", url_, demo("Scalar.ExtensionObject"),
+                    "{\"Type\":\"Range\",\"Body\":{\"Low\":-1.5,\"High\":99.25}}"});
+    ASSERT_EQ(w.exitCode, 0) << describe(w);
+    Result r = run({"ua", "read", url_, demo("Scalar.ExtensionObject"), "--json"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    json v = parseJson(r)["results"][0]["value"];
+    EXPECT_EQ(v["TypeId"], "i=886") << r.out;
+    EXPECT_EQ(v["Body"]["Low"], -1.5) << r.out;
+    EXPECT_EQ(v["Body"]["High"], 99.25) << r.out;
+
+    // What `read --json` printed for ServerStatus (nested BuildInfo, enumeration by name)
+    // is written back unchanged.
+    r = run({"ua", "read", url_, "i=2256", "--json"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    json status = parseJson(r)["results"][0]["value"];
+    w = run({"ua", "write", url_, demo("Scalar.ExtensionObject"), status.dump()});
+    ASSERT_EQ(w.exitCode, 0) << describe(w);
+    r = run({"ua", "read", url_, demo("Scalar.ExtensionObject"), "--json"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    EXPECT_EQ(parseJson(r)["results"][0]["value"], status);
+
+    // Arrays of structures, with the element type from the array.
+    w = run({"ua", "write", url_, demo("Array.ExtensionObject"),
+             "[{\"Type\":\"Range\",\"Body\":{\"Low\":0,\"High\":1}},"
+             "{\"Type\":\"Range\",\"Body\":{\"Low\":-10,\"High\":10}}]"});
+    ASSERT_EQ(w.exitCode, 0) << describe(w);
+    r = run({"ua", "read", url_, demo("Array.ExtensionObject"), "--json"});
+    json a = parseJson(r)["results"][0];
+    EXPECT_EQ(a["type"], "ExtensionObject[2]");
+    EXPECT_EQ(a["value"][1]["Body"]["Low"], -10);
+
+    // A misspelt field is a usage error.
+    w = run({"ua", "write", url_, demo("Scalar.ExtensionObject"),
+             "{\"Type\":\"Range\",\"Body\":{\"Lo\":1}}"});
+    EXPECT_EQ(w.exitCode, 2) << describe(w);
+    EXPECT_NE(w.err.find("no field Lo"), std::string::npos) << w.err;
+}
+
 TEST_F(CliTest, CallAdd) {
     Result r = run({"ua", "call", url_, demo("Demo"), demo("Demo.Add"), "2", "3"});
     ASSERT_EQ(r.exitCode, 0) << describe(r);
@@ -595,22 +635,22 @@ TEST_F(CliTest, NoServerIsAnOpcUaError) {
 // Demo.Sleep completes on a worker thread: while it waits the server keeps answering.
 TEST_F(CliTest, SleepDoesNotBlockTheNetworkThread) {
     const auto t0 = Clock::now();
-    Child sleeper(withBinary({"ua", "call", url_, demo("Demo"), demo("Demo.Sleep"), "1500"}));
+    Child sleeper(withBinary({"ua", "call", url_, demo("Demo"), demo("Demo.Sleep"), "2000"}));
     // Give the call time to be sent (process start + connect + Call).
-    std::this_thread::sleep_for(milliseconds(300));
+    std::this_thread::sleep_for(milliseconds(500));
     ASSERT_TRUE(sleeper.running()) << "Sleep call ended early";
     const auto r0 = Clock::now();
     Result read = run({"ua", "read", url_, "i=2258"});  // CurrentTime
     const auto readTime = std::chrono::duration_cast<milliseconds>(Clock::now() - r0);
     ASSERT_EQ(read.exitCode, 0) << describe(read);
     EXPECT_TRUE(sleeper.running()) << "the read should finish while Sleep is still pending";
-    EXPECT_LT(readTime.count(), 1000) << "read took " << readTime.count() << " ms";
+    EXPECT_LT(readTime.count(), 1200) << "read took " << readTime.count() << " ms";
 
     Result s = sleeper.wait(milliseconds(15000));
     const auto total = std::chrono::duration_cast<milliseconds>(Clock::now() - t0);
     ASSERT_EQ(s.exitCode, 0) << describe(s);
     EXPECT_NE(s.out.find("Good"), std::string::npos) << s.out;
-    EXPECT_GE(total.count(), 1500);
+    EXPECT_GE(total.count(), 2000);
 }
 
 // The brief's scenario with a short sleep: several 200 ms sleeps run concurrently (one

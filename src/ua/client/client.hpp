@@ -153,8 +153,12 @@ class Client {
     ClientStats stats() const;
 
     // ---- generic service call ---------------------------------------------------------
-    // Sends req (its RequestHeader is filled in) and returns the response. Throws Error for
-    // a ServiceFault, a Bad serviceResult, a timeout or a transport failure.
+    // Sends req and returns the response. The RequestHeader (authentication token,
+    // timestamp, request handle, timeoutHint from the deadline) is supplied by the client;
+    // whatever req.requestHeader holds is ignored. req is taken by value: pass an rvalue
+    // (std::move) to avoid a copy. Throws Error for a ServiceFault, a Bad serviceResult, a
+    // timeout or a transport failure. Resp defaults to ServiceTraits<Req>::Response; name it
+    // explicitly for services without a trait: request<MyRequest, MyResponse>(req).
     template <class Req, class Resp = ResponseOf<Req>>
     Resp request(Req req, Deadline deadline = {});
 
