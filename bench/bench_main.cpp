@@ -52,7 +52,7 @@ struct Options {
     std::size_t listenRuns = 10;     // (d)
     int serverCpu = 0;
     int clientCpu = 0;
-    bool realtime = false;  // SCHED_FIFO for every benchmark process
+    bool realtime = false;  // SCHED_FIFO for every benchmark process (decided in run())
     std::string server = "auto";  // auto | pnp | bench
     std::string pnpExe;           // `pnp` binary
     std::string helperDir;        // pnp_bench_* binaries
@@ -77,8 +77,10 @@ void usage() {
         "  --start-runs N          runs of (c) (default 30)\n"
         "  --listen-runs N         runs of (d) (default 10)\n"
         "  --only abcd             sections to run (default abcd)\n"
-        "  --realtime              SCHED_FIFO for every benchmark process (less noise on a busy\n"
-        "                          machine; needs root)\n"
+        "  --realtime | --no-realtime\n"
+        "                          SCHED_FIFO (priority 10) for every benchmark process, or not.\n"
+        "                          Default (auto): on when running as root and the 1-minute load\n"
+        "                          average exceeds 1, i.e. other work competes for the CPUs\n"
         "  --json PATH             also write the JSON result to PATH\n"
         "  --pnp PATH              the `pnp` executable\n");
 }
@@ -377,7 +379,7 @@ struct Results {
     std::vector<RttRow> write, call;
     std::string rttServer;
     // (c)
-    Summary inproc, exec, premain, connect, read, cli, floorMain;
+    Summary inproc, exec, premain, connect, read, cli, floorMain, staticCxx, staticAll;
     bool haveStart = false, haveCli = false;
     // (d)
     struct Idle {
@@ -485,6 +487,26 @@ int run(Options o) {
     }
     if (!rttKind) throw std::runtime_error("no OPC UA server executable for --server " + o.server);
 
+    // Scheduling: SCHED_FIFO keeps other processes (builds, ...) from preempting the
+    // measured processes; without load it changes little. Auto: on when root and loaded.
+    std::string schedReason;
+    {
+        double load1 = 0;
+        std::ifstream("/proc/loadavg") >> load1;
+        if (o.realtimeMode == 1) {
+            o.realtime = true;
+            schedReason = "--realtime";
+        } else if (o.realtimeMode == 0) {
+            schedReason = "--no-realtime";
+        } else if (::geteuid() == 0 && load1 > 1.0) {
+            o.realtime = true;
+            schedReason = "auto: load average " + num(load1, 2) + " > 1; --no-realtime to disable";
+        } else {
+            schedReason = ::geteuid() == 0 ? "auto: load average " + num(load1, 2) + " <= 1"
+                                           : "auto: not root";
+        }
+    }
+
     // The driver is the client of (a), (b), (d): pin it (and, by inheritance, (c)'s clients).
     pinToCpu(o.clientCpu);
     if (o.realtime) {
@@ -495,10 +517,11 @@ int run(Options o) {
 
     utsname u{};
     ::uname(&u);
-    std::printf("pnp benchmark: %s %s, %ld CPUs (%s), load average %s%s\n", u.sysname, u.release,
-                ::sysconf(_SC_NPROCESSORS_ONLN), cpuModel().c_str(), loadAvg().c_str(),
-                o.realtime ? ", SCHED_FIFO" : "");
+    std::printf("pnp benchmark: %s %s, %ld CPUs (%s), load average %s\n", u.sysname, u.release,
+                ::sysconf(_SC_NPROCESSORS_ONLN), cpuModel().c_str(), loadAvg().c_str());
     std::printf("placement: %s\n", placementText(o).c_str());
+    std::printf("scheduling: %s (%s)\n", o.realtime ? "SCHED_FIFO 10" : "SCHED_OTHER",
+                schedReason.c_str());
     std::printf("OPC UA server for (a)-(c): %s (%s)\n", rttKind->label.c_str(), rttKind->argv[0].c_str());
     std::printf("raw TCP baseline: %s (blocking sockets, TCP_NODELAY, 4-byte length prefix)\n",
                 echoExe.c_str());
@@ -597,10 +620,23 @@ int run(Options o) {
                     throw std::runtime_error(argv[0] + " failed");
                 return Times{s.spawnNs, tMain, tConn, tRead};
             };
-            // Interleaved with the client runs so that both see the same machine state.
+            // The same client linked with libstdc++/libgcc static, and fully static: how much
+            // of spawn -> Read is the dynamic loader (built by bench/CMakeLists.txt).
+            struct Variant {
+                std::string exe;
+                std::vector<double> spawnToRead;
+            };
+            std::vector<Variant> linkVariants;
+            for (const char* suffix : {"_static_cxx", "_static"})
+                if (executable(firstReadExe + suffix)) linkVariants.push_back({firstReadExe + suffix, {}});
+            // Interleaved so that every variant sees the same machine state.
             for (std::size_t i = 0; i < o.startRuns + 2; ++i) {  // 2 untimed runs: page cache
                 Times t = timedStart({firstReadExe, url, nsText, "Scalar.Int32"});
                 Times f = timedStart({emptyExe});
+                for (auto& v : linkVariants) {
+                    Times tv = timedStart({v.exe, url, nsText, "Scalar.Int32"});
+                    if (i >= 2) v.spawnToRead.push_back(static_cast<double>(tv.read - tv.spawn) / 1000.0);
+                }
                 if (i < 2) continue;
                 inproc.push_back(static_cast<double>(t.read - t.main) / 1000.0);
                 exec.push_back(static_cast<double>(t.read - t.spawn) / 1000.0);
@@ -639,6 +675,12 @@ int run(Options o) {
             res.connect = summarize(conn);
             res.read = summarize(rd);
             res.haveStart = true;
+            for (auto& v : linkVariants) {
+                if (v.exe.ends_with("_static_cxx"))
+                    res.staticCxx = summarize(v.spawnToRead);
+                else
+                    res.staticAll = summarize(v.spawnToRead);
+            }
             if (!cli.empty()) {
                 res.cli = summarize(cli);
                 res.haveCli = true;
@@ -656,6 +698,10 @@ int run(Options o) {
             rowc("spawn (posix_spawn) -> Read done", res.exec, true);
             rowc("  of which spawn -> top of main() (exec, ld.so, init)", res.premain, false);
             rowc("floor: empty C++ program, spawn -> top of main()", res.floorMain, false);
+            if (res.staticCxx.n)
+                rowc("same client, -static-libstdc++ -static-libgcc: spawn -> Read", res.staticCxx,
+                     false);
+            if (res.staticAll.n) rowc("same client, fully static (-static): spawn -> Read", res.staticAll, false);
             if (res.haveCli) rowc("`pnp ua read` CLI: spawn -> exit (informational)", res.cli, false);
             std::fflush(stdout);
         }
@@ -746,7 +792,8 @@ int run(Options o) {
     j += ",\"placement\":{\"server_cpu\":" + std::to_string(o.serverCpu) +
          ",\"client_cpu\":" + std::to_string(o.clientCpu) +
          ",\"same_core\":" + (o.serverCpu >= 0 && o.serverCpu == o.clientCpu ? "true" : "false") +
-         ",\"realtime\":" + (o.realtime ? "true" : "false") + "}";
+         ",\"realtime\":" + (o.realtime ? "true" : "false") +
+         ",\"scheduling\":" + jstr(schedReason) + "}";
     j += ",\"rtt_server\":" + jstr(res.rttServer) + ",\"iterations\":" + std::to_string(o.iterations) +
          ",\"warmup\":" + std::to_string(o.warmup);
     if (!res.write.empty()) j += ",\"write\":" + rttJson(res.write);
@@ -757,6 +804,8 @@ int run(Options o) {
              ",\"empty_program_spawn_to_main\":" + summaryJson(res.floorMain) +
              ",\"connect\":" + summaryJson(res.connect) + ",\"read\":" + summaryJson(res.read);
         if (res.haveCli) j += ",\"pnp_ua_read_cli_spawn_to_exit\":" + summaryJson(res.cli);
+        if (res.staticCxx.n) j += ",\"spawn_static_libstdcxx\":" + summaryJson(res.staticCxx);
+        if (res.staticAll.n) j += ",\"spawn_fully_static\":" + summaryJson(res.staticAll);
         j += "}";
     }
     if (!res.idle.empty()) {
@@ -838,7 +887,9 @@ int main(int argc, char** argv) {
             } else if (a == "--only") {
                 o.sections = next();
             } else if (a == "--realtime") {
-                o.realtime = true;
+                o.realtimeMode = 1;
+            } else if (a == "--no-realtime") {
+                o.realtimeMode = 0;
             } else if (a == "--json") {
                 o.jsonPath = next();
             } else if (a == "--pnp") {

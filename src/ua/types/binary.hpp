@@ -77,6 +77,7 @@ class BinaryDecoder {
 
     void raw(void* out, std::size_t n) {
         need(n);
+        if (n == 0) return;  // out is null for an empty array: memcpy(nullptr, ..., 0) is UB
         std::memcpy(out, p_, n);
         p_ += n;
     }
