@@ -575,19 +575,39 @@ int run(Options o) {
                     throw std::runtime_error("Call Echo: wrong output");
                 return static_cast<double>(t1 - t0);
             };
+            // Progress on a terminal only (one line, overwritten).
+            const bool tty = !o.quiet && ::isatty(2);
+            auto progress = [&](const char* section, std::size_t n) {
+                if (tty) std::fprintf(stderr, "\r  %s %zu bytes done   ", section, n);
+            };
+            auto progressDone = [&] {
+                if (tty) std::fprintf(stderr, "\r%40s\r", "");
+            };
+            // One-time warm-up of both paths (caches, allocator, CPU frequency) so that the
+            // first size is not measured colder than the others.
+            {
+                Options w = o;
+                w.iterations = 2000;
+                w.warmup = 0;
+                w.skipRaw = false;
+                measureSize(o.sizes.front(), w, raw, writeOp);
+                measureSize(o.sizes.front(), w, raw, callOp);
+            }
             if (o.sections.find('a') != std::string::npos) {
                 for (std::size_t n : o.sizes) {
                     res.write.push_back(measureSize(n, o, raw, writeOp));
-                    if (!o.quiet) std::fprintf(stderr, "  (a) %zu bytes done\n", n);
+                    progress("(a)", n);
                 }
+                progressDone();
                 printRttTable("(a) Write ns=<demo>;s=Scalar.ByteString vs raw TCP echo", res.write, o);
                 std::fflush(stdout);
             }
             if (o.sections.find('b') != std::string::npos) {
                 for (std::size_t n : o.sizes) {
                     res.call.push_back(measureSize(n, o, raw, callOp));
-                    if (!o.quiet) std::fprintf(stderr, "  (b) %zu bytes done\n", n);
+                    progress("(b)", n);
                 }
+                progressDone();
                 printRttTable("(b) Call Demo.Echo(ByteString) vs raw TCP echo", res.call, o);
                 std::fflush(stdout);
             }
@@ -699,10 +719,9 @@ int run(Options o) {
             rowc("  of which spawn -> top of main() (exec, ld.so, init)", res.premain, false);
             rowc("floor: empty C++ program, spawn -> top of main()", res.floorMain, false);
             if (res.staticCxx.n)
-                rowc("same client, -static-libstdc++ -static-libgcc: spawn -> Read", res.staticCxx,
-                     false);
-            if (res.staticAll.n) rowc("same client, fully static (-static): spawn -> Read", res.staticAll, false);
-            if (res.haveCli) rowc("`pnp ua read` CLI: spawn -> exit (informational)", res.cli, false);
+                rowc("same, -static-libstdc++ -static-libgcc: spawn -> Read", res.staticCxx, false);
+            if (res.staticAll.n) rowc("same, fully static (-static): spawn -> Read", res.staticAll, false);
+            if (res.haveCli) rowc("`pnp ua read` CLI: spawn -> exit (info)", res.cli, false);
             std::fflush(stdout);
         }
     }

@@ -76,7 +76,8 @@ struct ClientConfig {
 
     ReconnectPolicy reconnect;
 
-    // Buffer sizes and message limits of the transport (HEL/ACK negotiation).
+    // Buffer sizes and message limits of the transport (HEL/ACK negotiation), send timeout.
+    // Its requestedLifetime is replaced by secureChannelLifetime above.
     transport::ClientConfig transport;
     // Limits applied when decoding responses.
     DecodeLimits decodeLimits;
