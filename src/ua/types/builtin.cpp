@@ -56,7 +56,11 @@ DateTime DateTime::now() {
 }
 
 std::string DateTime::toIso8601() const {
-    Int64 unix100ns = ticks - kUnixEpochTicks;
+    // Part 6 §5.2.2.5: earlier than 1601 is the minimum, later than 9999 the maximum date.
+    // Clamping also keeps the subtraction from overflowing for ticks from the wire.
+    constexpr Int64 kMaxTicks = 2650467743999999999LL;  // 9999-12-31T23:59:59.9999999Z
+    const Int64 clamped = ticks < 0 ? 0 : ticks > kMaxTicks ? kMaxTicks : ticks;
+    Int64 unix100ns = clamped - kUnixEpochTicks;
     Int64 secs = unix100ns / 10000000;
     Int64 frac = unix100ns % 10000000;
     if (frac < 0) {
