@@ -69,10 +69,15 @@ bool hasNaN(const Variant& v) {
 }
 template <class T>
 bool hasNaNOf(const T& v) {
-    if constexpr (std::is_same_v<T, Variant> || std::is_same_v<T, DataValue>)
+    if constexpr (std::is_same_v<T, Variant> || std::is_same_v<T, DataValue>) {
         return hasNaN(v);
-    else
+    } else if constexpr (std::is_same_v<T, std::vector<DataValue>>) {
+        for (const auto& x : v)
+            if (hasNaN(x)) return true;
         return false;
+    } else {
+        return false;
+    }
 }
 
 // decode -> encode -> decode -> encode; both encodings equal, both values equal.

@@ -57,9 +57,14 @@ constexpr const char* kNodeForms =
     "expected i=85, ns=2;s=Name, nsu=urn:pnp:demo;s=Demo or a browse path like "
     "/Objects/Server/ServerStatus";
 
+// A browse path (from the Root folder) rather than a NodeId.
+bool isPath(const std::string& text) {
+    return text.starts_with("/") || text.starts_with(".") || text.starts_with("<");
+}
+
 // Rejects malformed NODE text before anything is sent (a usage error, exit code 2).
 void checkNodeText(const std::string& text) {
-    if (text.starts_with("/") || text.starts_with(".") || text.starts_with("<")) {
+    if (isPath(text)) {
         try {
             uac::parseRelativePath(text, [](std::string_view) { return UInt16{0}; });
         } catch (const uac::Error& e) {
@@ -69,10 +74,6 @@ void checkNodeText(const std::string& text) {
     }
     auto x = ExpandedNodeId::parse(text);
     if (!x || x->serverIndex != 0) throw UsageError("invalid node \"" + text + "\": " + kNodeForms);
-}
-
-bool isPath(const std::string& text) {
-    return text.starts_with("/") || text.starts_with(".") || text.starts_with("<");
 }
 
 // Throws client::Error (BadNoMatch, BadNotFound for an unknown namespace URI, ...).

@@ -82,7 +82,7 @@ wait_for_line "$OUT/tshark-capture.log" "Capture started" 2 "$TSHARK_PID" 2>/dev
 sleep 0.5
 
 # ---- 2. server + client ---------------------------------------------------------------
-"$PNP_BINARY" ua serve --port "$PORT" >"$OUT/pnp-server.log" 2>&1 </dev/null &
+"$PNP_BINARY" ua serve --port "$PORT" --user operator:secret >"$OUT/pnp-server.log" 2>&1 </dev/null &
 SERVER_PID=$!
 client_rc=99
 if wait_for_port "$PORT" 10 "$SERVER_PID"; then
