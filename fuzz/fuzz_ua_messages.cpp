@@ -31,6 +31,8 @@
 // Seeds: fuzz_ua_messages -pnp_write_seeds=<dir> (see fuzz_support.hpp).
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <string>
 #include <vector>
@@ -92,6 +94,12 @@ NodeId placeholderToken() {
 }
 
 // ---- the response / output checks -------------------------------------------------------
+// PNP_FUZZ_VERBOSE=1: prints every response (to see what a seed or crash input reaches).
+bool verbose() {
+    static const bool v = std::getenv("PNP_FUZZ_VERBOSE") != nullptr;
+    return v;
+}
+
 // A response as the server hands it to the transport: 24 reserved bytes, the encoding
 // NodeId, the body.
 void checkResponse(const Buffer& m) {
@@ -110,6 +118,16 @@ void checkResponse(const Buffer& m) {
         BinaryEncoder e(again);
         codec->reencode(d, e);
         check(d.remaining() == 0, "trailing bytes after the response", type.toString());
+        if (verbose()) {
+            std::fprintf(stderr, "  response %s (%zu bytes)", std::string(codec->name).c_str(), n);
+            if (type.numeric() == idOf<ServiceFault>()) {
+                BinaryDecoder f(p + prefix, n - prefix);
+                ServiceFault fault;
+                decode(f, fault);
+                std::fprintf(stderr, " %s", fault.responseHeader.serviceResult.toString().c_str());
+            }
+            std::fprintf(stderr, "\n");
+        }
         check(again.size() == n - prefix && std::equal(again.begin(), again.end(), p + prefix),
               "response does not re-encode to the same bytes", type.toString());
     } catch (const DecodeError& e) {
@@ -195,6 +213,7 @@ class DirectConnection final : public tp::ServerConnection {
     }
     void sendServiceFault(UInt32, UInt32, StatusCode status) override {
         accounting.responded();
+        if (verbose()) std::fprintf(stderr, "  ServiceFault %s\n", status.toString().c_str());
         check(status.isBad(), "ServiceFault with a good status");
         last.clear();
         lastFault = status;
@@ -231,6 +250,7 @@ class ChannelConnection final : public tp::ServerConnection, private tp::ServerC
     }
     void sendServiceFault(UInt32 requestId, UInt32 requestHandle, StatusCode status) override {
         accounting.responded();
+        if (verbose()) std::fprintf(stderr, "  ServiceFault %s\n", status.toString().c_str());
         check(status.isBad(), "ServiceFault with a good status");
         channel_.sendServiceFault(requestId, requestHandle, status);
     }
@@ -242,6 +262,11 @@ class ChannelConnection final : public tp::ServerConnection, private tp::ServerC
 
   private:
     void write(Buffer&& bytes) override {
+        if (verbose()) {
+            std::fprintf(stderr, "  transport wrote %.3s, %zu bytes %s\n",
+                         reinterpret_cast<const char*>(bytes.data()), bytes.size(),
+                         channel_.isClosed() ? channel_.closeReason().c_str() : "");
+        }
         checkOutput(bytes, channel_.limits(),
                     channel_.state() != tp::ServerChannel::State::AwaitHello);
         written += bytes.size();
@@ -288,6 +313,7 @@ struct Harness {
 
 void ChannelConnection::request(const tp::IncomingRequest& r) {
     accounting.requested();
+    if (verbose()) std::fprintf(stderr, "request %s\n", r.typeId.toString().c_str());
     harness().dispatch(shared_from_this(), r);
 }
 
@@ -335,10 +361,11 @@ Buffer openChunk(UInt32 channelId, UInt32 seq, UInt32 requestId, SecurityTokenRe
 // A request (type NodeId + body) as MSG chunks of at most maxChunk bytes on channel 1,
 // token 1.
 Buffer msgChunks(const Buffer& typeAndBody, UInt32 requestId, tp::SequenceGenerator& seq,
-                 std::size_t maxChunk = 8192, tp::MessageType type = tp::MessageType::Message) {
+                 std::size_t maxChunk = 8192, tp::MessageType type = tp::MessageType::Message,
+                 UInt32 tokenId = 1) {
     Buffer m = tp::newMessageBuffer();
     m.insert(m.end(), typeAndBody.begin(), typeAndBody.end());
-    tp::writeSymmetricChunks(m, type, kChannelId, 1, requestId, seq, maxChunk);
+    tp::writeSymmetricChunks(m, type, kChannelId, tokenId, requestId, seq, maxChunk);
     return m;
 }
 
@@ -691,15 +718,15 @@ void makeSeeds(pnp::fuzz::SeedWriter& w) {
             if (name != "closesession") append(all, msgChunks(typeAndBody, requestId++, seq));
         }
         w.add("open-all", kOpenStream, all);
-        // The Write request in chunks of 100 bytes.
+        // The Write request in chunks of 300 bytes (the server takes at most 10 chunks).
         for (const auto& [name, typeAndBody] : reqs.list) {
             if (name != "write") continue;
             tp::SequenceGenerator s(2);
-            w.add("open-write-chunked", kOpenStream, msgChunks(typeAndBody, 9, s, 100));
+            w.add("open-write-chunked", kOpenStream, msgChunks(typeAndBody, 9, s, 300));
             // An abort chunk after two intermediate ones, then the request again.
             tp::SequenceGenerator s2(2);
-            Buffer m = msgChunks(typeAndBody, 9, s2, 100);
-            Buffer abortThenAgain(m.begin(), m.begin() + 200);
+            Buffer m = msgChunks(typeAndBody, 9, s2, 300);
+            Buffer abortThenAgain(m.begin(), m.begin() + 600);
             Buffer abortChunk = tp::newMessageBuffer();
             BinaryEncoder e(abortChunk);
             e.number<UInt32>(status::BadRequestCancelledByClient.value);
@@ -710,7 +737,7 @@ void makeSeeds(pnp::fuzz::SeedWriter& w) {
             abortChunk[3] = 'A';
             append(abortThenAgain, abortChunk);
             tp::SequenceGenerator s4(5);
-            append(abortThenAgain, msgChunks(typeAndBody, 10, s4, 100));
+            append(abortThenAgain, msgChunks(typeAndBody, 10, s4, 300));
             w.add("open-abort", kOpenStream, abortThenAgain);
         }
         // Renew, then a request with the new token, then CLO.
@@ -726,7 +753,8 @@ void makeSeeds(pnp::fuzz::SeedWriter& w) {
         append(renew, m);
         CloseSecureChannelRequest clo;
         clo.requestHeader = header(0, NodeId());
-        append(renew, msgChunks(requestBody(clo), 5, s, 8192, tp::MessageType::CloseSecureChannel));
+        append(renew,
+               msgChunks(requestBody(clo), 5, s, 8192, tp::MessageType::CloseSecureChannel, 2));
         w.add("open-renew-read-close", kOpenStream, renew);
     }
 
@@ -794,6 +822,7 @@ void runService(Harness& h, const Byte* data, std::size_t size, bool withHeader)
     r.typeId = NodeId(0, type);
     r.body = body.data();
     r.size = body.size();
+    if (verbose()) std::fprintf(stderr, "request %s\n", r.typeId.toString().c_str());
     conn->accounting.requested();
     h.dispatch(conn, r);
     h.completeDeferred();
