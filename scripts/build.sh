@@ -51,7 +51,7 @@ case "$MODE" in
         else
             CXX_PATH="$(command -v g++)"
         fi
-        ARGS+=(-DCMAKE_BUILD_TYPE=Debug -DPNP_SANITIZE=ON -DPNP_FUZZ=OFF)
+        ARGS+=(-DCMAKE_BUILD_TYPE=Debug -DPNP_SANITIZE=ON -DPNP_FUZZ=OFF -DPNP_BUILD_BENCH=OFF)
         ARGS+=("-DCMAKE_CXX_COMPILER=$CXX_PATH")
         ;;
     fuzz)
