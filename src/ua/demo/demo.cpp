@@ -222,12 +222,11 @@ void addNodes(AddressSpace& as, UInt16 ns, std::shared_ptr<SleepWorker> worker,
                  {argument("Data", ns0::ByteString, "bytes to echo")},
                  {argument("Data", ns0::ByteString, "the same bytes")},
                  server::makeMethodHandler([](const server::MethodCallContext&,
-                                              const std::vector<Variant>& in,
+                                              std::vector<Variant>& in,
                                               std::vector<Variant>& out) -> StatusCode {
                      if (in.size() != 1) return status::BadArgumentsMissing;
-                     const ByteString* data = in[0].scalar<ByteString>();
-                     if (data == nullptr) return status::BadTypeMismatch;
-                     out = {*data};
+                     if (in[0].scalar<ByteString>() == nullptr) return status::BadTypeMismatch;
+                     out.push_back(std::move(in[0]));  // the input is ours: no copy
                      return status::Good;
                  }),
                  m);

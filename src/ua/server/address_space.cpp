@@ -427,7 +427,7 @@ bool AddressSpace::isSubtypeOf(const NodeId& type, const NodeId& base) const {
 
 // ---- namespaces ------------------------------------------------------------------------------
 UInt16 AddressSpace::addNamespace(std::string_view uri) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     auto& ns = impl_->namespaces;
     for (std::size_t i = 0; i < ns.size(); ++i)
         if (ns[i] == uri) return static_cast<UInt16>(i);
@@ -503,7 +503,7 @@ void storeValue(NodeExtra& x, DataValue v) {
 NodeId AddressSpace::addObject(const NodeId& parent, const NodeId& id,
                                const QualifiedName& browseName, const ObjectAttributes& attributes,
                                const NodeId& typeDefinition, const NodeId& referenceType) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex p = need(s, parent, status::BadParentNodeIdInvalid, "parent");
     NodeIndex td = needClass(s, typeDefinition, NodeClassBits::ObjectType,
@@ -527,7 +527,7 @@ NodeId AddressSpace::addFolder(const NodeId& parent, const NodeId& id,
 NodeId AddressSpace::addVariable(const NodeId& parent, const NodeId& id,
                                  const QualifiedName& browseName, const VariableAttributes& a,
                                  const NodeId& typeDefinition, const NodeId& referenceType) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex p = need(s, parent, status::BadParentNodeIdInvalid, "parent");
     NodeIndex td = needClass(s, typeDefinition, NodeClassBits::VariableType,
@@ -570,7 +570,7 @@ NodeId AddressSpace::addMethod(const NodeId& parent, const NodeId& id,
                                const MethodAttributes& attributes, const NodeId& referenceType) {
     NodeId methodId;
     {
-        std::unique_lock lock(impl_->mutex);
+        auto lock = impl_->lockForChange();
         Impl& s = *impl_;
         NodeIndex p = need(s, parent, status::BadParentNodeIdInvalid, "parent");
         std::uint16_t rt = needRefType(s, referenceType);
@@ -610,7 +610,7 @@ NodeId AddressSpace::addMethod(const NodeId& parent, const NodeId& id,
 
 NodeId AddressSpace::addObjectType(const NodeId& parentType, const NodeId& id,
                                    const QualifiedName& browseName, const ObjectTypeAttributes& a) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex p = needClass(s, parentType, NodeClassBits::ObjectType,
                             status::BadParentNodeIdInvalid, "parent type");
@@ -623,7 +623,7 @@ NodeId AddressSpace::addObjectType(const NodeId& parentType, const NodeId& id,
 NodeId AddressSpace::addVariableType(const NodeId& parentType, const NodeId& id,
                                      const QualifiedName& browseName,
                                      const VariableTypeAttributes& a) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex p = needClass(s, parentType, NodeClassBits::VariableType,
                             status::BadParentNodeIdInvalid, "parent type");
@@ -648,7 +648,7 @@ NodeId AddressSpace::addVariableType(const NodeId& parentType, const NodeId& id,
 NodeId AddressSpace::addReferenceType(const NodeId& parentType, const NodeId& id,
                                       const QualifiedName& browseName,
                                       const ReferenceTypeAttributes& a) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex p = needClass(s, parentType, NodeClassBits::ReferenceType,
                             status::BadParentNodeIdInvalid, "parent type");
@@ -668,7 +668,7 @@ NodeId AddressSpace::addReferenceType(const NodeId& parentType, const NodeId& id
 
 NodeId AddressSpace::addDataType(const NodeId& parentType, const NodeId& id,
                                  const QualifiedName& browseName, const DataTypeAttributes& a) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex p = needClass(s, parentType, NodeClassBits::DataType, status::BadParentNodeIdInvalid,
                             "parent type");
@@ -685,7 +685,7 @@ NodeId AddressSpace::addDataType(const NodeId& parentType, const NodeId& id,
 
 NodeId AddressSpace::addView(const NodeId& parent, const NodeId& id,
                              const QualifiedName& browseName, const ViewAttributes& a) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex p = need(s, parent, status::BadParentNodeIdInvalid, "parent");
     NodeIndex i = s.createNode(id, NodeClassBits::View, browseName, a);
@@ -697,7 +697,7 @@ NodeId AddressSpace::addView(const NodeId& parent, const NodeId& id,
 
 void AddressSpace::addReference(const NodeId& source, const NodeId& referenceType,
                                 const ExpandedNodeId& target, bool isForward) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex src = need(s, source, status::BadSourceNodeIdInvalid, "source");
     std::uint16_t rt = needRefType(s, referenceType);
@@ -735,7 +735,7 @@ void AddressSpace::addReference(const NodeId& source, const NodeId& referenceTyp
 
 bool AddressSpace::deleteReference(const NodeId& source, const NodeId& referenceType,
                                    const ExpandedNodeId& target, bool isForward) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex src = s.find(source);
     std::uint16_t rt = s.refTypeIndexOf(s.find(referenceType));
@@ -758,14 +758,14 @@ bool AddressSpace::deleteReference(const NodeId& source, const NodeId& reference
 }
 
 void AddressSpace::deleteNode(const NodeId& id, bool deleteChildren) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     NodeIndex i = need(*impl_, id, status::BadNodeIdUnknown, "node");
     impl_->deleteNode(i, deleteChildren);
 }
 
 // ---- application API: values ---------------------------------------------------------------
 StatusCode AddressSpace::setValue(const NodeId& variable, DataValue value) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex i = s.find(variable);
     if (i == kNoNode) return status::BadNodeIdUnknown;
@@ -790,7 +790,7 @@ DataValue AddressSpace::readValue(const NodeId& variable) const {
 }
 
 void AddressSpace::setValueCallback(const NodeId& variable, ValueCallbacks callbacks) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex i = need(s, variable, status::BadNodeIdUnknown, "variable");
     Node& n = s.nodes[i];
@@ -804,7 +804,7 @@ void AddressSpace::setValueCallback(const NodeId& variable, ValueCallbacks callb
 }
 
 void AddressSpace::setMethodHandler(const NodeId& method, MethodHandler handler) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     Impl& s = *impl_;
     NodeIndex i = needClass(s, method, NodeClassBits::Method, status::BadMethodInvalid, "method");
     if (handler)

@@ -110,8 +110,9 @@ class MethodCompletion {
 using MethodHandler = std::function<void(const MethodCallContext& context,
                                          std::vector<Variant> inputs, MethodCompletion done)>;
 // The synchronous convenience form: runs on the calling (network) thread, so it must be quick.
+// `inputs` belong to the call: a handler may move them into `outputs` (e.g. an echo).
 using SyncMethodHandler =
-    std::function<StatusCode(const MethodCallContext& context, const std::vector<Variant>& inputs,
+    std::function<StatusCode(const MethodCallContext& context, std::vector<Variant>& inputs,
                              std::vector<Variant>& outputs)>;
 MethodHandler makeMethodHandler(SyncMethodHandler handler);
 
@@ -314,6 +315,9 @@ class AddressSpace {
     // Checks every call, runs the handlers and invokes `done` once all of them completed:
     // before call() returns when every handler completed synchronously, otherwise on the
     // thread of the last completion (the session layer posts it back to its own thread).
+    // The rvalue form hands the input arguments to the handlers without copying them.
+    void call(CallRequest&& request, const NodeId& sessionId,
+              std::function<void(CallResponse)> done);
     void call(const CallRequest& request, const NodeId& sessionId,
               std::function<void(CallResponse)> done);
     // Blocks until every method completed (for application threads and tests; never call it

@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <memory>
+#include <mutex>
 #include <shared_mutex>
 #include <unordered_map>
 #include <vector>
@@ -26,6 +27,14 @@ struct AddressSpace::Impl {
 
     Options options;
     mutable std::shared_mutex mutex;
+    // Bumped by every change made under the exclusive lock (see lockForChange()); what is
+    // derived from the nodes and cached (method arguments) is valid for one generation.
+    std::uint64_t changeGeneration = 0;
+    std::unique_lock<std::shared_mutex> lockForChange() {
+        std::unique_lock lock(mutex);
+        ++changeGeneration;
+        return lock;
+    }
 
     // ---- nodes and ids -------------------------------------------------------------------
     std::vector<Node> nodes;
@@ -184,6 +193,15 @@ struct AddressSpace::Impl {
     DataValue storedValue(const Node& n) const;
     Variant decodeDefinition(const Node& n) const;
     std::vector<Argument> methodArguments(NodeIndex method, const char* name) const;
+    // The InputArguments of `method`, decoded once per changeGeneration (a Call would
+    // otherwise copy and decode the property's ExtensionObjects every time). Shared lock held.
+    std::shared_ptr<const std::vector<Argument>> inputArguments(NodeIndex method) const;
+    struct CachedArguments {
+        std::uint64_t generation = 0;
+        std::shared_ptr<const std::vector<Argument>> arguments;
+    };
+    mutable std::mutex argumentCacheMutex;
+    mutable std::unordered_map<NodeIndex, CachedArguments> argumentCache;
     StatusCode writeAttribute(std::unique_lock<std::shared_mutex>& lock, const WriteValue& item,
                               bool checkAccess);
 

@@ -197,6 +197,21 @@ std::vector<Argument> AddressSpace::Impl::methodArguments(NodeIndex method,
     return args;
 }
 
+std::shared_ptr<const std::vector<Argument>> AddressSpace::Impl::inputArguments(
+    NodeIndex method) const {
+    {
+        std::lock_guard guard(argumentCacheMutex);
+        auto it = argumentCache.find(method);
+        if (it != argumentCache.end() && it->second.generation == changeGeneration)
+            return it->second.arguments;
+    }
+    auto args = std::make_shared<const std::vector<Argument>>(
+        methodArguments(method, "InputArguments"));
+    std::lock_guard guard(argumentCacheMutex);
+    argumentCache[method] = CachedArguments{changeGeneration, args};
+    return args;
+}
+
 // ---- type checks ---------------------------------------------------------------------------
 bool AddressSpace::Impl::builtinMatches(BuiltinType b, const Variant& v, NodeIndex dataType) const {
     const NodeIndex baseDataType = find(ns0::BaseDataType);
@@ -699,6 +714,7 @@ StatusCode AddressSpace::Impl::writeAttribute(std::unique_lock<std::shared_mutex
     if (!next.sourceTimestamp) next.sourceTimestamp = now;
     next.serverTimestamp = now;
     nodes[i].extra->value.owned = std::make_unique<DataValue>(std::move(next));
+    ++changeGeneration;  // the lock may have been released for a write callback
     return kGood;
 }
 
@@ -709,14 +725,14 @@ WriteResponse AddressSpace::write(const WriteRequest& request) {
         return response;
     }
     response.results.reserve(request.nodesToWrite.size());
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     for (const auto& item : request.nodesToWrite)
         response.results.push_back(impl_->writeAttribute(lock, item, true));
     return response;
 }
 
 StatusCode AddressSpace::write(const WriteValue& item) {
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     return impl_->writeAttribute(lock, item, true);
 }
 
@@ -726,7 +742,7 @@ StatusCode AddressSpace::writeAttribute(const NodeId& id, AttributeId attribute,
     item.nodeId = id;
     item.attributeId = static_cast<UInt32>(attribute);
     item.value = DataValue(value);
-    std::unique_lock lock(impl_->mutex);
+    auto lock = impl_->lockForChange();
     return impl_->writeAttribute(lock, item, true);
 }
 

@@ -86,6 +86,11 @@ bool methodBelongsTo(const AddressSpace::Impl& s, NodeIndex object, NodeIndex me
 
 void AddressSpace::call(const CallRequest& request, const NodeId& sessionId,
                         std::function<void(CallResponse)> done) {
+    call(CallRequest(request), sessionId, std::move(done));
+}
+
+void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
+                        std::function<void(CallResponse)> done) {
     if (request.methodsToCall.empty()) {
         CallResponse r;
         r.responseHeader.serviceResult = status::BadNothingToDo;
@@ -123,7 +128,8 @@ void AddressSpace::call(const CallRequest& request, const NodeId& sessionId,
             } else if (!s.nodes[method].has(Node::kUserExecutable)) {
                 st = status::BadUserAccessDenied;
             } else {
-                std::vector<Argument> args = s.methodArguments(method, "InputArguments");
+                const auto declared = s.inputArguments(method);  // keeps them alive
+                const std::vector<Argument>& args = *declared;
                 if (m.inputArguments.size() < args.size()) {
                     st = status::BadArgumentsMissing;
                 } else if (m.inputArguments.size() > args.size()) {
@@ -163,7 +169,8 @@ void AddressSpace::call(const CallRequest& request, const NodeId& sessionId,
         auto slot = std::make_shared<MethodCompletion::Slot>(state, run.index);
         MethodCompletion completion(slot);
         try {
-            (*run.handler)(run.context, request.methodsToCall[run.index].inputArguments,
+            (*run.handler)(run.context,
+                           std::move(request.methodsToCall[run.index].inputArguments),
                            completion);
         } catch (...) {
             completion(status::BadInternalError);

@@ -507,9 +507,9 @@ void Server::call(const std::shared_ptr<transport::ServerConnection>& conn,
             return;
         }
     }
-    addressSpace_->call(req, ctx.session->sessionId,
-                        [conn, requestId = in.requestId, header = req.requestHeader](
-                            CallResponse resp) { sendResponse(*conn, requestId, header, resp); });
+    auto respond = [conn, requestId = in.requestId, header = std::move(req.requestHeader)](
+                       CallResponse resp) { sendResponse(*conn, requestId, header, resp); };
+    addressSpace_->call(std::move(req), ctx.session->sessionId, std::move(respond));
 }
 
 }  // namespace pnp::ua::server

@@ -106,7 +106,10 @@ class ClientConnection final : private ClientChannel::Hooks {
     int fd_ = -1;
     Deadline writeDeadline_{};
     std::deque<IncomingResponse> ready_;
-    bool awaitingFirstByte_ = false;  // a request was just sent: poll() before recv()
+    // SO_RCVTIMEO now set on the (blocking) socket; zero: none set yet.
+    std::chrono::nanoseconds receiveTimeout_{0};
+    // Blocking recv() for up to `left`: re-arms SO_RCVTIMEO only when the one set is off.
+    long receiveBlocking(std::span<Byte> space, std::chrono::nanoseconds left);
 };
 
 }  // namespace pnp::ua::transport
