@@ -6,7 +6,10 @@
 // present, throws DecodeError carrying BadDecodingError / BadEncodingLimitsExceeded.
 #pragma once
 
+#include <algorithm>
 #include <bit>
+#include <memory>
+#include <type_traits>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -34,7 +37,30 @@ class DecodeError : public std::runtime_error {
     StatusCode status_;
 };
 
-using Buffer = std::vector<Byte>;
+// Allocator whose value-initialisation does nothing: a Buffer grown by n bytes is about to be
+// overwritten (encoding, recv), so zeroing them first only costs time (a 32 KiB payload
+// would be written twice).
+template <class T>
+struct UninitializedAllocator : std::allocator<T> {
+    using value_type = T;
+    template <class U>
+    struct rebind {
+        using other = UninitializedAllocator<U>;
+    };
+    UninitializedAllocator() = default;
+    template <class U>
+    UninitializedAllocator(const UninitializedAllocator<U>&) noexcept {}
+    template <class U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template <class U, class... A>
+    void construct(U* p, A&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<A>(args)...);
+    }
+};
+
+using Buffer = std::vector<Byte, UninitializedAllocator<Byte>>;
 
 class BinaryEncoder {
   public:
@@ -43,6 +69,7 @@ class BinaryEncoder {
     void raw(const void* p, std::size_t n) {
         if (n == 0) return;
         std::size_t at = out_.size();
+        if (out_.capacity() - at < n) grow(n);
         out_.resize(at + n);
         std::memcpy(out_.data() + at, p, n);
     }
@@ -50,6 +77,7 @@ class BinaryEncoder {
     void number(T v) {
         static_assert(std::is_arithmetic_v<T>);
         std::size_t at = out_.size();
+        if (out_.capacity() - at < sizeof(T)) grow(sizeof(T));
         out_.resize(at + sizeof(T));
         std::memcpy(out_.data() + at, &v, sizeof(T));
     }
@@ -63,6 +91,11 @@ class BinaryEncoder {
     std::size_t size() const { return out_.size(); }
 
   private:
+    // Room for n more bytes and what usually follows a large field (the rest of the
+    // message), so a big ByteString is not copied again by the next small write.
+    void grow(std::size_t n) {
+        out_.reserve(std::max(out_.capacity() * 2, out_.size() + n + 1024));
+    }
     Buffer& out_;
 };
 

@@ -90,7 +90,8 @@ TEST(TcpMessages, HelloWithOversizedUrl) {
     Buffer body(20, 0);
     Int32 len = 5000;
     body.insert(body.end(), reinterpret_cast<Byte*>(&len), reinterpret_cast<Byte*>(&len) + 4);
-    body.resize(body.size() + 5000, 'u');
+    body.resize(body.size() + 5000);
+    std::fill(body.end() - 5000, body.end(), Byte{'u'});
     EXPECT_EQ(statusOf([&] { decodeHello(body.data(), body.size()); }),
               status::BadTcpEndpointUrlInvalid);
 }
