@@ -135,6 +135,8 @@ class Client::Impl {
     bool sessionInvalid = false;  // the server said it forgot the session
     UInt32 requestHandle = 0;
     RequestHeader header{};
+    // When the deadline of the request being sent was resolved (precise clock).
+    Clock::time_point resolvedAt{};
     std::unordered_map<UInt32, Pending> pending;
     Clock::time_point nextAsyncDeadline = Clock::time_point::max();
     Clock::time_point lastReceive{};
@@ -162,7 +164,7 @@ class Client::Impl {
     // The RequestHeader of the next request. It lives here (with the session's
     // authentication token) and is swapped into the request only while it is encoded.
     RequestHeader& makeHeader(Clock::time_point now, Clock::time_point deadline) {
-        header.timestamp = DateTime::now();
+        header.timestamp = DateTime::nowCoarse();
         header.requestHandle = ++requestHandle;
         header.timeoutHint = timeoutHint(now, deadline);
         return header;
@@ -258,7 +260,7 @@ class Client::Impl {
         for (;;) {
             std::optional<IncomingResponse> m =
                 conn->receive(std::min(deadline, nextAsyncDeadline));
-            Clock::time_point now = Clock::now();
+            Clock::time_point now = m ? transport::coarseNow() : Clock::now();
             if (!m) {
                 if (now >= deadline) {
                     ++stats.timeouts;
@@ -276,7 +278,8 @@ class Client::Impl {
     // One request on the current connection, no reconnect. TransportError passes through.
     IncomingResponse exchange(Client::EncodeRef encode, Clock::time_point deadline,
                               std::string_view service, Completions& done, bool& sent) {
-        Clock::time_point now = Clock::now();
+        // The precise time the deadline was resolved at, unless the coarse clock is later.
+        Clock::time_point now = std::max(resolvedAt, transport::coarseNow());
         Buffer buffer = transport::ClientConnection::newMessageBuffer();
         encode(buffer, makeHeader(now, deadline));
         UInt32 id = conn->send(std::move(buffer), deadline);
@@ -433,7 +436,7 @@ class Client::Impl {
     void ensureReady(Clock::time_point deadline, std::string_view service, Completions& done) {
         if (!wantConnected)
             throw Error(status::BadNotConnected, std::string(service) + ": not connected");
-        if (conn) checkIdleConnection(Clock::now(), done);
+        if (conn) checkIdleConnection(transport::coarseNow(), done);
         if (!conn) {
             if (!config.reconnect.enabled)
                 throw Error(status::BadNotConnected,
@@ -457,7 +460,7 @@ class Client::Impl {
 
     // A request whose deadline passed before it was sent is not sent at all.
     void checkDeadline(Clock::time_point deadline, std::string_view service) {
-        if (Clock::now() >= deadline) {
+        if (transport::deadlinePassed(deadline)) {
             ++stats.timeouts;
             throw Error(status::BadTimeout,
                         std::string(service) + ": deadline passed before sending");
@@ -760,7 +763,8 @@ IncomingResponse Client::roundTrip(EncodeRef encode, bool idempotent, Deadline d
     Impl& s = *impl_;
     Completions done;
     std::lock_guard lock(s.mutex);
-    Clock::time_point dl = deadline.resolve(Clock::now(), s.config.requestTimeout);
+    s.resolvedAt = Clock::now();
+    Clock::time_point dl = deadline.resolve(s.resolvedAt, s.config.requestTimeout);
     return s.roundTrip(encode, idempotent, dl, service, done);
 }
 
@@ -769,7 +773,8 @@ void Client::sendAsync(EncodeRef encode, Deadline deadline, std::string_view ser
     Impl& s = *impl_;
     Completions done;
     std::lock_guard lock(s.mutex);
-    Clock::time_point dl = deadline.resolve(Clock::now(), s.config.requestTimeout);
+    s.resolvedAt = Clock::now();
+    Clock::time_point dl = deadline.resolve(s.resolvedAt, s.config.requestTimeout);
     try {
         s.sendAsync(encode, dl, service, callback, done);
     } catch (const Error& e) {

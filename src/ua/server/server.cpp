@@ -207,7 +207,7 @@ template <class Resp>
 void sendResponse(transport::ServerConnection& conn, UInt32 requestId, const RequestHeader& req,
                   Resp& resp) {
     resp.responseHeader.requestHandle = req.requestHandle;
-    resp.responseHeader.timestamp = DateTime::now();
+    resp.responseHeader.timestamp = DateTime::nowCoarse();
     if (resp.responseHeader.serviceResult.isBad()) {
         // A failed service carries no results (Part 4 §7.30): answer with a ServiceFault.
         conn.sendServiceFault(requestId, req.requestHandle, resp.responseHeader.serviceResult);
@@ -246,7 +246,7 @@ bool Server::accept(const std::shared_ptr<transport::ServerConnection>& conn,
         return false;
     }
     ctx.session = it->second.get();
-    ctx.session->lastActivity = transport::Clock::now();
+    ctx.session->lastActivity = transport::coarseNow();
     return true;
 }
 

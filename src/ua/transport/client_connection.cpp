@@ -220,7 +220,9 @@ void ClientConnection::response(IncomingResponse&& r) { ready_.push_back(std::mo
 // (~0.75 us of a ~15 us loopback round trip). The deadline becomes SO_RCVTIMEO; it is re-set
 // only when the armed one would overshoot the deadline by more than kTimeoutSlack or wake
 // far too early, so a series of requests with the same timeout sets it once. SO_RCVTIMEO
-// rounds to scheduler ticks, so short waits keep to the precise ppoll() path.
+// rounds to scheduler ticks (and the time left is taken from the coarse clock), so a
+// deadline more than 20 ms away is kept to within a few ms; shorter waits keep to the precise
+// ppoll() path.
 namespace {
 constexpr std::chrono::nanoseconds kTimeoutSlack = std::chrono::milliseconds(2);
 constexpr std::chrono::nanoseconds kPreciseBelow = std::chrono::milliseconds(20);
@@ -250,7 +252,8 @@ bool ClientConnection::readOnce(Deadline deadline) {
     if (fd_ < 0) throw TransportError(status::BadConnectionClosed, "connection closed");
     auto space = channel_.readSpace();
     for (;;) {
-        auto now = Clock::now();
+        // Coarse: the deadline is kept to within a scheduler tick (see receiveBlocking).
+        auto now = coarseNow();
         ssize_t n;
         if (deadline <= now) {
             n = ::recv(fd_, space.data(), space.size(), MSG_DONTWAIT);
@@ -262,7 +265,7 @@ bool ClientConnection::readOnce(Deadline deadline) {
         }
         if (n > 0) {
             try {
-                channel_.received(static_cast<std::size_t>(n), Clock::now());
+                channel_.received(static_cast<std::size_t>(n), coarseNow());
             } catch (const TransportError&) {
                 closeSocket();
                 throw;
@@ -293,8 +296,7 @@ UInt32 ClientConnection::send(Buffer&& message) {
 UInt32 ClientConnection::send(Buffer&& message, Deadline deadline) {
     if (!isOpen()) throw TransportError(status::BadConnectionClosed, "connection closed");
     writeDeadline_ = deadline;
-    auto now = Clock::now();
-    channel_.renewIfDue(now);
+    channel_.renewIfDue(coarseNow());
     // A renew response that is already there switches us to the new token before sending.
     if (channel_.renewPending()) drainAvailable();
     UInt32 id = channel_.send(std::move(message));
@@ -321,8 +323,9 @@ std::optional<IncomingResponse> ClientConnection::receive(Deadline deadline) {
 
 bool ClientConnection::renewIfDue() {
     if (!isOpen()) return false;
-    writeDeadline_ = Clock::now() + config_.sendTimeout;
-    return channel_.renewIfDue(Clock::now());
+    auto now = coarseNow();
+    writeDeadline_ = now + config_.sendTimeout;
+    return channel_.renewIfDue(now);
 }
 
 void ClientConnection::close() {

@@ -231,7 +231,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             return;
         }
         inBatch_ = true;
-        channel_.received(n, Clock::now());  // never throws: errors become ERR + Closed
+        channel_.received(n, coarseNow());  // never throws: errors become ERR + Closed
         inBatch_ = false;
         flush();
         if (channel_.isClosed()) beginClose();

@@ -1,5 +1,7 @@
 #include "ua/types/builtin.hpp"
 
+#include <time.h>
+
 #include <charconv>
 #include <chrono>
 #include <cstdio>
@@ -53,6 +55,12 @@ DateTime DateTime::now() {
                   std::chrono::system_clock::now().time_since_epoch())
                   .count();
     return fromUnixNanos(ns);
+}
+
+DateTime DateTime::nowCoarse() {
+    timespec ts{};
+    ::clock_gettime(CLOCK_REALTIME_COARSE, &ts);
+    return fromUnixNanos(Int64{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec);
 }
 
 std::string DateTime::toIso8601() const {

@@ -71,6 +71,9 @@ struct DateTime {
 
     static constexpr Int64 kUnixEpochTicks = 116444736000000000LL;
     static DateTime now();
+    // The wall clock at scheduler-tick resolution (a few ms): ~4 ns instead of ~50 ns for a
+    // precise reading on a VM. For header timestamps, never for values' timestamps.
+    static DateTime nowCoarse();
     static DateTime fromUnixNanos(Int64 ns) { return {kUnixEpochTicks + ns / 100}; }
     Int64 toUnixNanos() const { return (ticks - kUnixEpochTicks) * 100; }
     std::string toIso8601() const;
