@@ -418,6 +418,9 @@ namespace pnp::ua {{
             out.append("\n")
         out.append(f"    bool operator==(const {dt.cpp_name}&) const = default;\n}};\n")
         out.append(f"void encode(BinaryEncoder& e, const {dt.cpp_name}& v);\n")
+        if self.starts_with_request_header(dt):
+            out.append("// Every field but the RequestHeader: a client encodes its own header in front.\n")
+            out.append(f"void encodeAfterRequestHeader(BinaryEncoder& e, const {dt.cpp_name}& v);\n")
         out.append(f"void decode(BinaryDecoder& d, {dt.cpp_name}& v);\n")
         out.append(f"std::string toJson(const {dt.cpp_name}& v);\n")
         if "Binary" in dt.encodings:
@@ -480,10 +483,22 @@ namespace pnp::ua {{
         out.append("}  // namespace pnp::ua\n")
         return "".join(out)
 
+    def starts_with_request_header(self, dt: M.DataType) -> bool:
+        fis = self.fields.get(dt.id) or []
+        return (dt.kind != "union" and bool(fis) and fis[0].member == "requestHeader"
+                and not any(fi.optional for fi in fis))
+
     def struct_codec(self, dt: M.DataType) -> str:
         name = dt.cpp_name
         fis = self.fields[dt.id]
         o = []
+        if self.starts_with_request_header(dt):
+            o.append(f"void encodeAfterRequestHeader(BinaryEncoder& e, const {name}& v) {{\n")
+            if len(fis) == 1:
+                o.append("    (void)e;\n    (void)v;\n")
+            for fi in fis[1:]:
+                o.append(f"    encode(e, v.{fi.member});\n")
+            o.append("}\n\n")
         # encode
         o.append(f"void encode(BinaryEncoder& e, const {name}& v) {{\n")
         if not fis and dt.kind != "union":

@@ -162,7 +162,7 @@ class Client::Impl {
     }
 
     // The RequestHeader of the next request. It lives here (with the session's
-    // authentication token) and is swapped into the request only while it is encoded.
+    // authentication token) and is encoded in place of the request's own header.
     RequestHeader& makeHeader(Clock::time_point now, Clock::time_point deadline) {
         header.timestamp = DateTime::nowCoarse();
         header.requestHandle = ++requestHandle;
@@ -280,7 +280,7 @@ class Client::Impl {
                               std::string_view service, Completions& done, bool& sent) {
         // The precise time the deadline was resolved at, unless the coarse clock is later.
         Clock::time_point now = std::max(resolvedAt, transport::coarseNow());
-        Buffer buffer = transport::ClientConnection::newMessageBuffer();
+        Buffer buffer = conn->messageBuffer();
         encode(buffer, makeHeader(now, deadline));
         UInt32 id = conn->send(std::move(buffer), deadline);
         sent = true;
@@ -504,8 +504,8 @@ class Client::Impl {
             checkDeadline(deadline, service);
             ensureReady(deadline, service, done);
             try {
-                Clock::time_point now = Clock::now();
-                Buffer buffer = transport::ClientConnection::newMessageBuffer();
+                Clock::time_point now = std::max(resolvedAt, transport::coarseNow());
+                Buffer buffer = conn->messageBuffer();
                 encode(buffer, makeHeader(now, deadline));
                 UInt32 id = conn->send(std::move(buffer), deadline);
                 ++stats.requestsSent;

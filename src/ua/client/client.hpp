@@ -258,29 +258,17 @@ class Client {
     class Impl;
 
   private:
-    // Appends the request (encoding NodeId + body) to `buffer`, with `header` as its
-    // RequestHeader. The header is swapped in and out of the request around the encoding,
-    // so neither is copied (no allocation for the authentication token).
+    // Appends the request (encoding NodeId + body) to `buffer`, with `header` encoded in
+    // place of the request's own RequestHeader (no copy of the authentication token).
     struct EncodeRef {
-        void* object;
-        void (*function)(void*, Buffer&, RequestHeader&);
-        void operator()(Buffer& b, RequestHeader& h) const { function(object, b, h); }
+        const void* object;
+        void (*function)(const void*, Buffer&, const RequestHeader&);
+        void operator()(Buffer& b, const RequestHeader& h) const { function(object, b, h); }
     };
     template <class Req>
-    static EncodeRef encoderFor(Req& req) {
-        return {&req, [](void* p, Buffer& b, RequestHeader& h) {
-                    auto& r = *static_cast<Req*>(p);
-                    using std::swap;
-                    swap(r.requestHeader, h);
-                    struct Restore {
-                        Req& r;
-                        RequestHeader& h;
-                        ~Restore() {
-                            using std::swap;
-                            swap(r.requestHeader, h);
-                        }
-                    } restore{r, h};
-                    detail::encodeRequest(b, r);
+    static EncodeRef encoderFor(const Req& req) {
+        return {&req, [](const void* p, Buffer& b, const RequestHeader& h) {
+                    detail::encodeRequest(b, *static_cast<const Req*>(p), h);
                 }};
     }
     using RawCallback = std::function<void(Result<transport::IncomingResponse>)>;

@@ -154,40 +154,46 @@ void encodeBodies(BinaryEncoder& e, const std::vector<T>& v) {
     e.number<Int32>(static_cast<Int32>(v.size()));
     for (const auto& x : v) encodeBody(e, x);
 }
-inline void encodeBody(BinaryEncoder& e, const ReadRequest& r) {
-    encode(e, r.requestHeader);
+inline void encodeBody(BinaryEncoder& e, const ReadRequest& r, const RequestHeader& h) {
+    encode(e, h);
     encode(e, r.maxAge);
     encode(e, r.timestampsToReturn);
     encodeBodies(e, r.nodesToRead);
 }
-inline void encodeBody(BinaryEncoder& e, const WriteRequest& r) {
-    encode(e, r.requestHeader);
+inline void encodeBody(BinaryEncoder& e, const WriteRequest& r, const RequestHeader& h) {
+    encode(e, h);
     encodeBodies(e, r.nodesToWrite);
 }
-inline void encodeBody(BinaryEncoder& e, const HistoryReadRequest& r) {
-    encode(e, r.requestHeader);
+inline void encodeBody(BinaryEncoder& e, const HistoryReadRequest& r, const RequestHeader& h) {
+    encode(e, h);
     encode(e, r.historyReadDetails);
     encode(e, r.timestampsToReturn);
     encode(e, r.releaseContinuationPoints);
     encodeBodies(e, r.nodesToRead);
 }
-inline void encodeBody(BinaryEncoder& e, const CreateMonitoredItemsRequest& r) {
-    encode(e, r.requestHeader);
+inline void encodeBody(BinaryEncoder& e, const CreateMonitoredItemsRequest& r, const RequestHeader& h) {
+    encode(e, h);
     encode(e, r.subscriptionId);
     encode(e, r.timestampsToReturn);
     encodeBodies(e, r.itemsToCreate);
 }
-template <class T>
-void encodeBody(BinaryEncoder& e, const T& v) {
-    encode(e, v);
+template <class Req>
+void encodeBody(BinaryEncoder& e, const Req& r, const RequestHeader& h) {
+    encode(e, h);
+    encodeAfterRequestHeader(e, r);
 }
 
 // Appends "encoding NodeId + body" of a request to a message buffer.
 template <class Req>
-void encodeRequest(Buffer& out, const Req& req) {
+void encodeRequest(Buffer& out, const Req& req, const RequestHeader& header) {
     BinaryEncoder e(out);
     encode(e, NodeId(0, DataTypeInfo<Req>::binaryEncodingId));
-    encodeBody(e, req);
+    encodeBody(e, req, header);
+}
+// The same with the request's own RequestHeader.
+template <class Req>
+void encodeRequest(Buffer& out, const Req& req) {
+    encodeRequest(out, req, req.requestHeader);
 }
 
 // Throws the Error that a response of the wrong type stands for: the serviceResult of a

@@ -63,6 +63,8 @@ class ClientConnection final : private ClientChannel::Hooks {
     ClientConnection& operator=(const ClientConnection&) = delete;
 
     static Buffer newMessageBuffer() { return transport::newMessageBuffer(); }
+    // The same, reusing the memory of the last request sent when it is small enough.
+    Buffer messageBuffer();
 
     // Sends a request (a newMessageBuffer() with type NodeId + body appended); returns the
     // request id assigned to it. The default deadline is now + config.sendTimeout.
@@ -106,6 +108,7 @@ class ClientConnection final : private ClientChannel::Hooks {
     int fd_ = -1;
     Deadline writeDeadline_{};
     std::deque<IncomingResponse> ready_;
+    Buffer spare_;  // the last request sent, kept for its memory (see messageBuffer())
     // SO_RCVTIMEO now set on the (blocking) socket; zero: none set yet.
     std::chrono::nanoseconds receiveTimeout_{0};
     // Blocking recv() for up to `left`: re-arms SO_RCVTIMEO only when the one set is off.

@@ -267,12 +267,23 @@ void ServerChannel::handleMessage(UInt32 requestId, const Byte* body, std::size_
 }
 
 bool ServerChannel::send(UInt32 requestId, Buffer&& message) {
+    return sendMessage(requestId, std::move(message), false);
+}
+
+bool ServerChannel::sendMessage(UInt32 requestId, Buffer&& message, bool isFault) {
     if (state_ != State::Open) return false;
     if (message.size() < kSymmetricHeaderSize) return false;
     if (previous_) dropExpiredPrevious(Clock::now());
     const std::size_t body = message.size() - kSymmetricHeaderSize;
     const std::size_t chunks = chunkCount(body, limits_.sendBufferSize);
     if (exceedsPeerLimits(limits_, body, chunks)) {
+        // Limits so small that not even a ServiceFault fits (found by the fuzzer): the
+        // client cannot be answered, so the channel ends with an ERR.
+        if (isFault) {
+            fail(status::BadResponseTooLarge,
+                 "a ServiceFault of " + std::to_string(body) + " bytes exceeds the client's limits");
+            return false;
+        }
         return sendServiceFault(requestId, responseRequestHandle(message),
                                 status::BadResponseTooLarge);
     }
@@ -292,7 +303,7 @@ bool ServerChannel::sendServiceFault(UInt32 requestId, UInt32 requestHandle, Sta
     fault.responseHeader.serviceResult = status;
     encode(e, encodingId<ServiceFault>());
     encode(e, fault);
-    return send(requestId, std::move(b));
+    return sendMessage(requestId, std::move(b), true);
 }
 
 void ServerChannel::tick(TimePoint now) {

@@ -128,6 +128,8 @@ class ServerChannel {
     UInt32 currentTokenId() const { return current_.tokenId; }
 
   private:
+    // send(); `isFault`: the message is the ServiceFault replacing a response too large.
+    bool sendMessage(UInt32 requestId, Buffer&& message, bool isFault);
     void handleChunk(const RawChunk& raw, TimePoint now);
     void handleHello(const RawChunk& raw);
     void handleSecureChunk(const RawChunk& raw, TimePoint now);

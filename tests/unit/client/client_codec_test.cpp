@@ -92,6 +92,29 @@ TEST(RequestCodec, EncodesTypeIdThenBody) {
     EXPECT_EQ(back, req);
 }
 
+// Requests without a hand-written body: the client's header in front, then the generated
+// encodeAfterRequestHeader() - byte for byte what the generated encoder writes.
+TEST(ClientCodec, GenericRequestWithTheClientsHeader) {
+    CallRequest req{};
+    CallMethodRequest m{};
+    m.objectId = NodeId(2, "Demo");
+    m.methodId = NodeId(2, "Demo.Echo");
+    m.inputArguments.emplace_back(ByteString("abc"));
+    req.methodsToCall.push_back(m);
+    RequestHeader h{};
+    h.authenticationToken = NodeId(0, ByteString("token-bytes-1234567890"));
+    h.requestHandle = 42;
+    h.timeoutHint = 1500;
+    Buffer ours;
+    detail::encodeRequest(ours, req, h);
+    CallRequest expected = req;
+    expected.requestHeader = h;
+    Buffer generated = encodeToBuffer(NodeId(0, DataTypeInfo<CallRequest>::binaryEncodingId));
+    Buffer body = encodeToBuffer(expected);
+    generated.insert(generated.end(), body.begin(), body.end());
+    EXPECT_EQ(ours, generated);
+}
+
 // Encodes with the client's request codec and checks: the type id, a round trip through the
 // generated decoder, and the bytes against the generated encoder once every empty IndexRange
 // is filled in (both then agree byte for byte).

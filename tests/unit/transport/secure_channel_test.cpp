@@ -476,6 +476,26 @@ class OpenRequestTest : public ChannelPair {
 TEST_F(OpenRequestTest, Valid) {
     EXPECT_EQ(openWith([](auto&) {}), StatusCode{});
 }
+
+// Found by the fuzzer: a client whose MaxMessageSize is smaller than even a ServiceFault
+// made send() and sendServiceFault() call each other until the stack overflowed.
+TEST_F(OpenRequestTest, NotEvenAServiceFaultFitsClosesTheChannel) {
+    ccfg.maxMessageSize = 24;
+    ASSERT_EQ(openWith([](auto&) {}), StatusCode{});
+    echo = false;
+    toServerRaw(rawMsg(2, 7, pattern(1), ChunkType::Final, server->channelId(),
+                       server->currentTokenId()));
+    ASSERT_EQ(requests.size(), 1u);
+    Buffer m = newMessageBuffer();
+    BinaryEncoder e(m);
+    encode(e, kEchoResponse);
+    encode(e, DateTime::now());
+    encode(e, UInt32{778});
+    m.resize(m.size() + 100);
+    EXPECT_FALSE(server->send(requests[0], std::move(m)));
+    EXPECT_TRUE(server->isClosed());
+    EXPECT_EQ(server->closeStatus(), status::BadResponseTooLarge);
+}
 TEST_F(OpenRequestTest, RenewBeforeIssue) {
     EXPECT_EQ(openWith([](auto& r) { r.requestType = SecurityTokenRequestType::Renew; }),
               status::BadRequestTypeInvalid);
