@@ -328,7 +328,7 @@ GetEndpointsRequest getEndpoints(UInt32 handle) {
 }
 
 // The ServiceFault's result, or nullopt when the response is no ServiceFault.
-std::optional<StatusCode> serviceFault(const NodeId& type, const Buffer& body,
+std::optional<StatusCode> serviceFault(const NodeId& type, const transport::MessageBody& body,
                                        UInt32* handle = nullptr) {
     if (type != encodingId<ServiceFault>()) return std::nullopt;
     auto f = decodeFromBuffer<ServiceFault>(body.data(), body.size());

@@ -9,7 +9,7 @@ namespace pnp::ua::transport {
 
 // ---- ChunkReader -----------------------------------------------------------------------
 ChunkReader::ChunkReader(std::size_t capacity, std::size_t maxChunkSize)
-    : buf_(new Byte[std::max(capacity, kMessageHeaderSize)]),
+    : buf_(std::max(capacity, kMessageHeaderSize)),
       capacity_(std::max(capacity, kMessageHeaderSize)),
       maxChunk_(std::min(maxChunkSize, capacity_)) {}
 
@@ -19,11 +19,20 @@ std::span<Byte> ChunkReader::readSpace() {
     if (begin_ == end_) {
         begin_ = end_ = 0;
     } else if (begin_ > 0) {
-        std::memmove(buf_.get(), buf_.get() + begin_, end_ - begin_);
+        std::memmove(buf_.data(), buf_.data() + begin_, end_ - begin_);
         end_ -= begin_;
         begin_ = 0;
     }
-    return {buf_.get() + end_, capacity_ - end_};
+    return {buf_.data() + end_, capacity_ - end_};
+}
+
+Buffer ChunkReader::detach() {
+    if (begin_ != end_) throw std::logic_error("ChunkReader::detach with bytes still buffered");
+    Buffer out = std::move(buf_);
+    out.resize(end_);
+    buf_ = Buffer(capacity_);  // uninitialised (UninitializedAllocator)
+    begin_ = end_ = 0;
+    return out;
 }
 
 void ChunkReader::commit(std::size_t n) { end_ = std::min(end_ + n, capacity_); }
@@ -39,7 +48,7 @@ std::size_t ChunkReader::append(const Byte* p, std::size_t n) {
 std::optional<RawChunk> ChunkReader::next() {
     std::size_t avail = end_ - begin_;
     if (avail < kMessageHeaderSize) return std::nullopt;
-    const Byte* p = buf_.get() + begin_;
+    const Byte* p = buf_.data() + begin_;
     MessageHeader h = decodeMessageHeader(p);
     if (h.size > maxChunk_) {
         throw TransportError(status::BadTcpMessageTooLarge,

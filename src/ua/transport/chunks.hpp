@@ -51,9 +51,12 @@ class ChunkReader {
 
     std::size_t buffered() const { return end_ - begin_; }
     void clear() { begin_ = end_ = 0; }
+    // Hands out the whole buffer (chunks returned by next() keep pointing into it) and
+    // continues with a new one. Only when nothing is buffered after the last chunk.
+    Buffer detach();
 
   private:
-    std::unique_ptr<Byte[]> buf_;
+    Buffer buf_;
     std::size_t capacity_;
     std::size_t maxChunk_;
     std::size_t begin_ = 0;

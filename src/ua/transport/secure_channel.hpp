@@ -9,6 +9,7 @@
 
 #include <chrono>
 #include <optional>
+#include <algorithm>
 #include <span>
 #include <string>
 
@@ -28,10 +29,33 @@ struct IncomingRequest {
 // A response handed to the client. For a response the server aborted with an abort chunk
 // (OPC 10000-6 §6.7.3) status is the abort chunk's Error, typeId is null and body empty;
 // otherwise status is Good.
+// The bytes of a received message body: a slice of a buffer it owns, so a large body can
+// stay where it was received (no copy) and a multi-chunk one where it was assembled.
+class MessageBody {
+  public:
+    MessageBody() = default;
+    explicit MessageBody(Buffer bytes) : storage_(std::move(bytes)), size_(storage_.size()) {}
+    MessageBody(Buffer storage, std::size_t offset, std::size_t size)
+        : storage_(std::move(storage)), offset_(offset), size_(size) {}
+    const Byte* data() const { return storage_.data() + offset_; }
+    std::size_t size() const { return size_; }
+    bool empty() const { return size_ == 0; }
+    const Byte* begin() const { return data(); }
+    const Byte* end() const { return data() + size_; }
+    friend bool operator==(const MessageBody& a, const Buffer& b) {
+        return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin());
+    }
+
+  private:
+    Buffer storage_;
+    std::size_t offset_ = 0;
+    std::size_t size_ = 0;
+};
+
 struct IncomingResponse {
     UInt32 requestId = 0;
-    NodeId typeId;  // the binary encoding id of the response, e.g. i=634 ReadResponse
-    Buffer body;    // the encoded response after its type NodeId
+    NodeId typeId;     // the binary encoding id of the response, e.g. i=634 ReadResponse
+    MessageBody body;  // the encoded response after its type NodeId
     StatusCode status;
 };
 

@@ -188,6 +188,31 @@ TEST_F(ChannelPair, HandshakeAndEcho) {
     EXPECT_TRUE(cs.responses[0].status.isGood());
 }
 
+// A large single-chunk response stays in the receive buffer it arrived in (handed over with
+// the response); the channel goes on with a new buffer.
+TEST_F(ChannelPair, LargeSingleChunkBodyIsHandedOverWithoutCopy) {
+    open();
+    for (int round = 0; round < 3; ++round) {
+        Buffer small = pattern(100, static_cast<Byte>(round));
+        Buffer large = pattern(6000, static_cast<Byte>(round + 7));
+        client->send(request(kEchoRequest, large));
+        pump();
+        client->send(request(kEchoRequest, small));
+        pump();
+        ASSERT_EQ(cs.responses.size(), 2u * (round + 1));
+        EXPECT_EQ(cs.responses[2 * round].body, large);
+        EXPECT_EQ(cs.responses[2 * round + 1].body, small);
+    }
+    // Back-to-back requests: both responses intact.
+    Buffer a = pattern(5000, 1), b = pattern(5000, 2);
+    client->send(request(kEchoRequest, a));
+    client->send(request(kEchoRequest, b));
+    pump();
+    ASSERT_EQ(cs.responses.size(), 8u);
+    EXPECT_EQ(cs.responses[6].body, a);
+    EXPECT_EQ(cs.responses[7].body, b);
+}
+
 TEST_F(ChannelPair, EverythingFedByteByByte) {
     create();
     client->start(now);
