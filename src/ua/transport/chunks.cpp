@@ -26,15 +26,6 @@ std::span<Byte> ChunkReader::readSpace() {
     return {buf_.data() + end_, capacity_ - end_};
 }
 
-Buffer ChunkReader::detach() {
-    if (begin_ != end_) throw std::logic_error("ChunkReader::detach with bytes still buffered");
-    Buffer out = std::move(buf_);
-    out.resize(end_);
-    buf_ = Buffer(capacity_);  // uninitialised (UninitializedAllocator)
-    begin_ = end_ = 0;
-    return out;
-}
-
 void ChunkReader::commit(std::size_t n) { end_ = std::min(end_ + n, capacity_); }
 
 std::size_t ChunkReader::append(const Byte* p, std::size_t n) {

@@ -51,9 +51,6 @@ class ChunkReader {
 
     std::size_t buffered() const { return end_ - begin_; }
     void clear() { begin_ = end_ = 0; }
-    // Hands out the whole buffer (chunks returned by next() keep pointing into it) and
-    // continues with a new one. Only when nothing is buffered after the last chunk.
-    Buffer detach();
 
   private:
     Buffer buf_;

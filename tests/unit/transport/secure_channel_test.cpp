@@ -188,9 +188,8 @@ TEST_F(ChannelPair, HandshakeAndEcho) {
     EXPECT_TRUE(cs.responses[0].status.isGood());
 }
 
-// A large single-chunk response stays in the receive buffer it arrived in (handed over with
-// the response); the channel goes on with a new buffer.
-TEST_F(ChannelPair, LargeSingleChunkBodyIsHandedOverWithoutCopy) {
+// Large single-chunk responses one after the other and back to back: every body intact.
+TEST_F(ChannelPair, LargeSingleChunkBodies) {
     open();
     for (int round = 0; round < 3; ++round) {
         Buffer small = pattern(100, static_cast<Byte>(round));
