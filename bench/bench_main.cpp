@@ -379,7 +379,7 @@ struct Results {
     std::vector<RttRow> write, call;
     std::string rttServer;
     // (c)
-    Summary inproc, exec, premain, connect, read, cli, floorMain, staticCxx, staticAll;
+    Summary inproc, exec, premain, connect, read, cli, floorMain, dynamicCxx, staticAll;
     bool haveStart = false, haveCli = false;
     // (d)
     struct Idle {
@@ -640,14 +640,14 @@ int run(Options o) {
                     throw std::runtime_error(argv[0] + " failed");
                 return Times{s.spawnNs, tMain, tConn, tRead};
             };
-            // The same client linked with libstdc++/libgcc static, and fully static: how much
-            // of spawn -> Read is the dynamic loader (built by bench/CMakeLists.txt).
+            // The same client linked with the shared libstdc++, and fully static: how much of
+            // spawn -> Read is the dynamic loader (built by bench/CMakeLists.txt).
             struct Variant {
                 std::string exe;
                 std::vector<double> spawnToRead;
             };
             std::vector<Variant> linkVariants;
-            for (const char* suffix : {"_static_cxx", "_static"})
+            for (const char* suffix : {"_dynamic_cxx", "_static"})
                 if (executable(firstReadExe + suffix)) linkVariants.push_back({firstReadExe + suffix, {}});
             // Interleaved so that every variant sees the same machine state.
             for (std::size_t i = 0; i < o.startRuns + 2; ++i) {  // 2 untimed runs: page cache
@@ -696,8 +696,8 @@ int run(Options o) {
             res.read = summarize(rd);
             res.haveStart = true;
             for (auto& v : linkVariants) {
-                if (v.exe.ends_with("_static_cxx"))
-                    res.staticCxx = summarize(v.spawnToRead);
+                if (v.exe.ends_with("_dynamic_cxx"))
+                    res.dynamicCxx = summarize(v.spawnToRead);
                 else
                     res.staticAll = summarize(v.spawnToRead);
             }
@@ -717,9 +717,9 @@ int run(Options o) {
             rowc("  of which the Read", res.read, false);
             rowc("spawn (posix_spawn) -> Read done", res.exec, true);
             rowc("  of which spawn -> top of main() (exec, ld.so, init)", res.premain, false);
-            rowc("floor: empty C++ program, spawn -> top of main()", res.floorMain, false);
-            if (res.staticCxx.n)
-                rowc("same, -static-libstdc++ -static-libgcc: spawn -> Read", res.staticCxx, false);
+            rowc("empty C++ program (shared libstdc++): spawn -> main()", res.floorMain, false);
+            if (res.dynamicCxx.n)
+                rowc("same, shared libstdc++ (info): spawn -> Read", res.dynamicCxx, false);
             if (res.staticAll.n) rowc("same, fully static (-static): spawn -> Read", res.staticAll, false);
             if (res.haveCli) rowc("`pnp ua read` CLI: spawn -> exit (info)", res.cli, false);
             std::fflush(stdout);
@@ -823,7 +823,7 @@ int run(Options o) {
              ",\"empty_program_spawn_to_main\":" + summaryJson(res.floorMain) +
              ",\"connect\":" + summaryJson(res.connect) + ",\"read\":" + summaryJson(res.read);
         if (res.haveCli) j += ",\"pnp_ua_read_cli_spawn_to_exit\":" + summaryJson(res.cli);
-        if (res.staticCxx.n) j += ",\"spawn_static_libstdcxx\":" + summaryJson(res.staticCxx);
+        if (res.dynamicCxx.n) j += ",\"spawn_shared_libstdcxx\":" + summaryJson(res.dynamicCxx);
         if (res.staticAll.n) j += ",\"spawn_fully_static\":" + summaryJson(res.staticAll);
         j += "}";
     }
