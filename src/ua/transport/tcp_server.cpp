@@ -70,7 +70,9 @@ struct TcpServer::Impl {
 
     ServerTransportConfig config;
     ServiceHandler& handler;
-    asio::io_context io{1};
+    // All socket operations run on the network thread (other threads post to it), so the
+    // reactor's per-descriptor locks can go; posting and registration stay thread-safe.
+    asio::io_context io{ASIO_CONCURRENCY_HINT_UNSAFE_IO};
     tcp::acceptor acceptor{io};
     asio::steady_timer housekeepingTimer{io};
     asio::steady_timer acceptRetryTimer{io};
