@@ -52,14 +52,14 @@ struct Options {
     std::size_t listenRuns = 10;     // (d)
     int serverCpu = 0;
     int clientCpu = 0;
-    bool realtime = false;  // SCHED_FIFO for every benchmark process (decided in run())
+    bool realtime = false;        // SCHED_FIFO for every benchmark process (decided in run())
     std::string server = "auto";  // auto | pnp | bench
     std::string pnpExe;           // `pnp` binary
     std::string helperDir;        // pnp_bench_* binaries
     std::string jsonPath;
     std::string sections = "abcd";
     bool quiet = false;
-    bool skipRaw = false;  // profiling: OPC UA round trips only
+    bool skipRaw = false;   // profiling: OPC UA round trips only
     int realtimeMode = -1;  // -1 auto, 0 off, 1 on
 };
 
@@ -299,7 +299,8 @@ class RawClient {
         frame_.resize(4 + n);
         std::uint32_t len = static_cast<std::uint32_t>(n);
         std::memcpy(frame_.data(), &len, 4);
-        for (std::size_t i = 0; i < n; ++i) frame_[4 + i] = static_cast<unsigned char>(seed + i * 7);
+        for (std::size_t i = 0; i < n; ++i)
+            frame_[4 + i] = static_cast<unsigned char>(seed + i * 7);
         reply_.assign(4 + n, 0);
     }
     double roundTrip(bool verify) {
@@ -307,7 +308,8 @@ class RawClient {
         if (!sendAll(fd_, frame_.data(), frame_.size())) fail("raw echo: send");
         long n = recvFrame(fd_, reply_, frame_.size() - 4);
         std::int64_t t1 = nowNs();
-        if (n != static_cast<long>(frame_.size() - 4)) throw std::runtime_error("raw echo: bad reply");
+        if (n != static_cast<long>(frame_.size() - 4))
+            throw std::runtime_error("raw echo: bad reply");
         if (verify && std::memcmp(reply_.data(), frame_.data(), frame_.size()) != 0)
             throw std::runtime_error("raw echo: payload differs");
         return static_cast<double>(t1 - t0);
@@ -392,17 +394,18 @@ struct Results {
 
 void printRttTable(const char* title, const std::vector<RttRow>& rows, const Options& o) {
     std::printf("\n%s\n", title);
-    std::printf("  (µs; %zu measured round trips per size and kind after %zu warm-up, OPC UA and raw "
-                "alternating in blocks of %zu)\n",
-                o.iterations, o.warmup, o.block);
+    std::printf(
+        "  (µs; %zu measured round trips per size and kind after %zu warm-up, OPC UA and raw "
+        "alternating in blocks of %zu)\n",
+        o.iterations, o.warmup, o.block);
     std::printf("  %7s | %9s %9s | %9s %9s | %6s %6s | %s\n", "bytes", "UA med", "UA p99",
                 "raw med", "raw p99", "ratio", "r.p99", "≤1.20");
     std::printf("  --------+---------------------+---------------------+---------------+------\n");
     for (const auto& r : rows) {
         double ratio = r.ua.median / r.raw.median;
         double ratio99 = r.ua.p99 / r.raw.p99;
-        std::printf("  %7zu | %9.1f %9.1f | %9.1f %9.1f | %6.2f %6.2f | %s\n", r.bytes,
-                    r.ua.median, r.ua.p99, r.raw.median, r.raw.p99, ratio, ratio99,
+        std::printf("  %7zu | %9.1f %9.1f | %9.1f %9.1f | %6.2f %6.2f | %s\n", r.bytes, r.ua.median,
+                    r.ua.p99, r.raw.median, r.raw.p99, ratio, ratio99,
                     ratio <= 1.2 ? "ok" : "MISS");
     }
 }
@@ -412,10 +415,9 @@ std::string rttJson(const std::vector<RttRow>& rows) {
     for (std::size_t i = 0; i < rows.size(); ++i) {
         const auto& r = rows[i];
         if (i) s += ',';
-        s += "{\"bytes\":" + std::to_string(r.bytes) +
-             ",\"n\":" + std::to_string(r.ua.n) + ",\"ua_median_us\":" + num(r.ua.median) +
-             ",\"ua_p99_us\":" + num(r.ua.p99) + ",\"raw_median_us\":" + num(r.raw.median) +
-             ",\"raw_p99_us\":" + num(r.raw.p99) +
+        s += "{\"bytes\":" + std::to_string(r.bytes) + ",\"n\":" + std::to_string(r.ua.n) +
+             ",\"ua_median_us\":" + num(r.ua.median) + ",\"ua_p99_us\":" + num(r.ua.p99) +
+             ",\"raw_median_us\":" + num(r.raw.median) + ",\"raw_p99_us\":" + num(r.raw.p99) +
              ",\"ratio_median\":" + num(r.ua.median / r.raw.median) +
              ",\"ratio_p99\":" + num(r.ua.p99 / r.raw.p99) + "}";
     }
@@ -456,9 +458,10 @@ std::string loadAvg() {
 
 std::string placementText(const Options& o) {
     auto cpu = [](int c) { return c < 0 ? std::string("any") : std::to_string(c); };
-    std::string kind = o.serverCpu >= 0 && o.serverCpu == o.clientCpu
-                           ? "same core (like `taskset -c " + std::to_string(o.serverCpu) + "` for both)"
-                           : "different cores";
+    std::string kind =
+        o.serverCpu >= 0 && o.serverCpu == o.clientCpu
+            ? "same core (like `taskset -c " + std::to_string(o.serverCpu) + "` for both)"
+            : "different cores";
     return "server CPU " + cpu(o.serverCpu) + ", client CPU " + cpu(o.clientCpu) + ": " + kind;
 }
 
@@ -473,10 +476,11 @@ int run(Options o) {
 
     std::vector<ServerKind> kinds;
     if (executable(o.pnpExe))
-        kinds.push_back({"pnp ua serve",
-                         {o.pnpExe, "ua", "serve", "--host", "127.0.0.1", "--port", "0"}});
+        kinds.push_back(
+            {"pnp ua serve", {o.pnpExe, "ua", "serve", "--host", "127.0.0.1", "--port", "0"}});
     if (executable(benchServerExe))
-        kinds.push_back({"pnp_bench_server", {benchServerExe, "--host", "127.0.0.1", "--port", "0"}});
+        kinds.push_back(
+            {"pnp_bench_server", {benchServerExe, "--host", "127.0.0.1", "--port", "0"}});
     const ServerKind* rttKind = nullptr;
     for (const auto& k : kinds) {
         if (o.server == "auto" || (o.server == "pnp" && k.label == "pnp ua serve") ||
@@ -522,7 +526,8 @@ int run(Options o) {
     std::printf("placement: %s\n", placementText(o).c_str());
     std::printf("scheduling: %s (%s)\n", o.realtime ? "SCHED_FIFO 10" : "SCHED_OTHER",
                 schedReason.c_str());
-    std::printf("OPC UA server for (a)-(c): %s (%s)\n", rttKind->label.c_str(), rttKind->argv[0].c_str());
+    std::printf("OPC UA server for (a)-(c): %s (%s)\n", rttKind->label.c_str(),
+                rttKind->argv[0].c_str());
     std::printf("raw TCP baseline: %s (blocking sockets, TCP_NODELAY, 4-byte length prefix)\n",
                 echoExe.c_str());
     std::fflush(stdout);
@@ -599,7 +604,8 @@ int run(Options o) {
                     progress("(a)", n);
                 }
                 progressDone();
-                printRttTable("(a) Write ns=<demo>;s=Scalar.ByteString vs raw TCP echo", res.write, o);
+                printRttTable("(a) Write ns=<demo>;s=Scalar.ByteString vs raw TCP echo", res.write,
+                              o);
                 std::fflush(stdout);
             }
             if (o.sections.find('b') != std::string::npos) {
@@ -648,14 +654,16 @@ int run(Options o) {
             };
             std::vector<Variant> linkVariants;
             for (const char* suffix : {"_dynamic_cxx", "_static"})
-                if (executable(firstReadExe + suffix)) linkVariants.push_back({firstReadExe + suffix, {}});
+                if (executable(firstReadExe + suffix))
+                    linkVariants.push_back({firstReadExe + suffix, {}});
             // Interleaved so that every variant sees the same machine state.
             for (std::size_t i = 0; i < o.startRuns + 2; ++i) {  // 2 untimed runs: page cache
                 Times t = timedStart({firstReadExe, url, nsText, "Scalar.Int32"});
                 Times f = timedStart({emptyExe});
                 for (auto& v : linkVariants) {
                     Times tv = timedStart({v.exe, url, nsText, "Scalar.Int32"});
-                    if (i >= 2) v.spawnToRead.push_back(static_cast<double>(tv.read - tv.spawn) / 1000.0);
+                    if (i >= 2)
+                        v.spawnToRead.push_back(static_cast<double>(tv.read - tv.spawn) / 1000.0);
                 }
                 if (i < 2) continue;
                 inproc.push_back(static_cast<double>(t.read - t.main) / 1000.0);
@@ -705,8 +713,10 @@ int run(Options o) {
                 res.cli = summarize(cli);
                 res.haveCli = true;
             }
-            std::printf("\n(c) client start -> first completed Read (ns=<demo>;s=Scalar.Int32), %zu runs, µs\n",
-                        res.inproc.n);
+            std::printf(
+                "\n(c) client start -> first completed Read (ns=<demo>;s=Scalar.Int32), %zu runs, "
+                "µs\n",
+                res.inproc.n);
             std::printf("  %-52s %9s %9s %9s | %s\n", "", "median", "p99", "min", "≤1000");
             auto rowc = [](const char* label, const Summary& s, bool target) {
                 std::printf("  %-52s %9.0f %9.0f %9.0f | %s\n", label, s.median, s.p99, s.min,
@@ -720,16 +730,18 @@ int run(Options o) {
             rowc("empty C++ program (shared libstdc++): spawn -> main()", res.floorMain, false);
             if (res.dynamicCxx.n)
                 rowc("same, shared libstdc++ (info): spawn -> Read", res.dynamicCxx, false);
-            if (res.staticAll.n) rowc("same, fully static (-static): spawn -> Read", res.staticAll, false);
+            if (res.staticAll.n)
+                rowc("same, fully static (-static): spawn -> Read", res.staticAll, false);
             if (res.haveCli) rowc("`pnp ua read` CLI: spawn -> exit (info)", res.cli, false);
             std::fflush(stdout);
         }
     }
 
     if (o.sections.find('d') != std::string::npos) {
-        std::printf("\n(d) idle server: spawn -> accepting, and VmRSS after one session came and went"
-                    " (%zu runs each, medians)\n",
-                    o.listenRuns);
+        std::printf(
+            "\n(d) idle server: spawn -> accepting, and VmRSS after one session came and went"
+            " (%zu runs each, medians)\n",
+            o.listenRuns);
         std::printf("  %-18s | %10s %10s | %9s %9s %9s %9s %7s | %s\n", "server", "accept ms",
                     "line ms", "RSS kB", "HWM kB", "anon kB", "file kB", "threads",
                     "≤100 ms / ≤8 MiB");
@@ -776,8 +788,9 @@ int run(Options o) {
             std::fflush(stdout);
             res.idle.push_back(idle);
         }
-        std::printf("  accept ms: spawn -> a TCP connect to the port succeeded (right after the"
-                    " \"listening on\" line, line ms)\n");
+        std::printf(
+            "  accept ms: spawn -> a TCP connect to the port succeeded (right after the"
+            " \"listening on\" line, line ms)\n");
     }
 
     // ---- verdict + JSON ---------------------------------------------------------------------
@@ -786,8 +799,9 @@ int run(Options o) {
         for (const auto& r : rows) w = std::max(w, r.ua.median / r.raw.median);
         return w;
     };
-    std::printf("\nTargets: median RTT ≤ 1.2 × raw TCP at every size; client start -> first Read ≤"
-                " 1 ms; idle RSS ≤ 8 MiB; accepting ≤ 100 ms after spawn\n");
+    std::printf(
+        "\nTargets: median RTT ≤ 1.2 × raw TCP at every size; client start -> first Read ≤"
+        " 1 ms; idle RSS ≤ 8 MiB; accepting ≤ 100 ms after spawn\n");
     if (!res.write.empty())
         std::printf("  Write: worst median ratio %.2f  %s\n", worst(res.write),
                     worst(res.write) <= 1.2 ? "ok" : "MISS");
@@ -799,9 +813,10 @@ int run(Options o) {
                     res.inproc.median, res.exec.median, res.inproc.median <= 1000 ? "ok" : "MISS",
                     res.exec.median <= 1000 ? "ok" : "MISS");
     for (const auto& i : res.idle)
-        std::printf("  %s: RSS %.0f kB (%.2f MiB) %s, accepting after %.1f ms %s\n", i.label.c_str(),
-                    i.rssKb.median, i.rssKb.median / 1024, i.rssKb.median <= 8192 ? "ok" : "MISS",
-                    i.listen.median, i.listen.median <= 100 ? "ok" : "MISS");
+        std::printf("  %s: RSS %.0f kB (%.2f MiB) %s, accepting after %.1f ms %s\n",
+                    i.label.c_str(), i.rssKb.median, i.rssKb.median / 1024,
+                    i.rssKb.median <= 8192 ? "ok" : "MISS", i.listen.median,
+                    i.listen.median <= 100 ? "ok" : "MISS");
     std::printf("  load average before / after: %s / %s\n", loadBefore.c_str(), loadAvg().c_str());
 
     std::string j = "{\"benchmark\":\"pnp\",\"version\":1,\"unit_rtt\":\"us\"";
@@ -813,13 +828,15 @@ int run(Options o) {
          ",\"same_core\":" + (o.serverCpu >= 0 && o.serverCpu == o.clientCpu ? "true" : "false") +
          ",\"realtime\":" + (o.realtime ? "true" : "false") +
          ",\"scheduling\":" + jstr(schedReason) + "}";
-    j += ",\"rtt_server\":" + jstr(res.rttServer) + ",\"iterations\":" + std::to_string(o.iterations) +
+    j += ",\"rtt_server\":" + jstr(res.rttServer) +
+         ",\"iterations\":" + std::to_string(o.iterations) +
          ",\"warmup\":" + std::to_string(o.warmup);
     if (!res.write.empty()) j += ",\"write\":" + rttJson(res.write);
     if (!res.call.empty()) j += ",\"call\":" + rttJson(res.call);
     if (res.haveStart) {
         j += ",\"first_read_us\":{\"in_process\":" + summaryJson(res.inproc) +
-             ",\"spawn\":" + summaryJson(res.exec) + ",\"spawn_to_main\":" + summaryJson(res.premain) +
+             ",\"spawn\":" + summaryJson(res.exec) +
+             ",\"spawn_to_main\":" + summaryJson(res.premain) +
              ",\"empty_program_spawn_to_main\":" + summaryJson(res.floorMain) +
              ",\"connect\":" + summaryJson(res.connect) + ",\"read\":" + summaryJson(res.read);
         if (res.haveCli) j += ",\"pnp_ua_read_cli_spawn_to_exit\":" + summaryJson(res.cli);
@@ -832,10 +849,10 @@ int run(Options o) {
         for (std::size_t i = 0; i < res.idle.size(); ++i) {
             const auto& d = res.idle[i];
             if (i) j += ',';
-            j += "{\"server\":" + jstr(d.label) +
-                 ",\"accepting_ms\":" + summaryJson(d.listen) +
+            j += "{\"server\":" + jstr(d.label) + ",\"accepting_ms\":" + summaryJson(d.listen) +
                  ",\"listening_line_ms\":" + summaryJson(d.listenLine) +
-                 ",\"vmrss_kb\":" + summaryJson(d.rssKb, 0) + ",\"vmhwm_kb\":" + summaryJson(d.hwmKb, 0) +
+                 ",\"vmrss_kb\":" + summaryJson(d.rssKb, 0) +
+                 ",\"vmhwm_kb\":" + summaryJson(d.hwmKb, 0) +
                  ",\"rss_anon_kb\":" + summaryJson(d.anonKb, 0) +
                  ",\"rss_file_kb\":" + summaryJson(d.fileKb, 0) +
                  ",\"threads\":" + std::to_string(d.threads) + "}";

@@ -10,42 +10,14 @@
 #include <vector>
 
 #include "ua/client/error.hpp"
+#include "ua/types/attribute_id.hpp"
 #include "ua/types/binary.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_types.hpp"
 
 namespace pnp::ua::client {
 
-// Node attributes (Part 6 Annex A.1).
-enum class AttributeId : UInt32 {
-    NodeId = 1,
-    NodeClass = 2,
-    BrowseName = 3,
-    DisplayName = 4,
-    Description = 5,
-    WriteMask = 6,
-    UserWriteMask = 7,
-    IsAbstract = 8,
-    Symmetric = 9,
-    InverseName = 10,
-    ContainsNoLoops = 11,
-    EventNotifier = 12,
-    Value = 13,
-    DataType = 14,
-    ValueRank = 15,
-    ArrayDimensions = 16,
-    AccessLevel = 17,
-    UserAccessLevel = 18,
-    MinimumSamplingInterval = 19,
-    Historizing = 20,
-    Executable = 21,
-    UserExecutable = 22,
-    DataTypeDefinition = 23,
-    RolePermissions = 24,
-    UserRolePermissions = 25,
-    AccessRestrictions = 26,
-    AccessLevelEx = 27,
-};
+using ua::AttributeId;  // ua/types/attribute_id.hpp
 
 // Primary template: services without a specialisation can still be sent with
 // request<Req, Resp>() and are never retried.
@@ -171,7 +143,8 @@ inline void encodeBody(BinaryEncoder& e, const HistoryReadRequest& r, const Requ
     encode(e, r.releaseContinuationPoints);
     encodeBodies(e, r.nodesToRead);
 }
-inline void encodeBody(BinaryEncoder& e, const CreateMonitoredItemsRequest& r, const RequestHeader& h) {
+inline void encodeBody(BinaryEncoder& e, const CreateMonitoredItemsRequest& r,
+                       const RequestHeader& h) {
     encode(e, h);
     encode(e, r.subscriptionId);
     encode(e, r.timestampsToReturn);

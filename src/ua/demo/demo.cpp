@@ -218,18 +218,18 @@ void addNodes(AddressSpace& as, UInt16 ns, std::shared_ptr<SleepWorker> worker,
 
     server::MethodAttributes m;
     m.description = LocalizedText("en", "returns its input");
-    as.addMethod(demo, NodeId(ns, "Demo.Echo"), QualifiedName{ns, "Echo"},
-                 {argument("Data", ns0::ByteString, "bytes to echo")},
-                 {argument("Data", ns0::ByteString, "the same bytes")},
-                 server::makeMethodHandler([](const server::MethodCallContext&,
-                                              std::vector<Variant>& in,
-                                              std::vector<Variant>& out) -> StatusCode {
-                     if (in.size() != 1) return status::BadArgumentsMissing;
-                     if (in[0].scalar<ByteString>() == nullptr) return status::BadTypeMismatch;
-                     out.push_back(std::move(in[0]));  // the input is ours: no copy
-                     return status::Good;
-                 }),
-                 m);
+    as.addMethod(
+        demo, NodeId(ns, "Demo.Echo"), QualifiedName{ns, "Echo"},
+        {argument("Data", ns0::ByteString, "bytes to echo")},
+        {argument("Data", ns0::ByteString, "the same bytes")},
+        server::makeMethodHandler([](const server::MethodCallContext&, std::vector<Variant>& in,
+                                     std::vector<Variant>& out) -> StatusCode {
+            if (in.size() != 1) return status::BadArgumentsMissing;
+            if (in[0].scalar<ByteString>() == nullptr) return status::BadTypeMismatch;
+            out.push_back(std::move(in[0]));  // the input is ours: no copy
+            return status::Good;
+        }),
+        m);
 
     m.description = LocalizedText("en", "a + b (Int32, wraps around)");
     as.addMethod(demo, NodeId(ns, "Demo.Add"), QualifiedName{ns, "Add"},

@@ -111,9 +111,8 @@ using MethodHandler = std::function<void(const MethodCallContext& context,
                                          std::vector<Variant> inputs, MethodCompletion done)>;
 // The synchronous convenience form: runs on the calling (network) thread, so it must be quick.
 // `inputs` belong to the call: a handler may move them into `outputs` (e.g. an echo).
-using SyncMethodHandler =
-    std::function<StatusCode(const MethodCallContext& context, std::vector<Variant>& inputs,
-                             std::vector<Variant>& outputs)>;
+using SyncMethodHandler = std::function<StatusCode(
+    const MethodCallContext& context, std::vector<Variant>& inputs, std::vector<Variant>& outputs)>;
 MethodHandler makeMethodHandler(SyncMethodHandler handler);
 
 // ---- browse continuation points ----------------------------------------------------------

@@ -205,8 +205,8 @@ std::shared_ptr<const std::vector<Argument>> AddressSpace::Impl::inputArguments(
         if (it != argumentCache.end() && it->second.generation == changeGeneration)
             return it->second.arguments;
     }
-    auto args = std::make_shared<const std::vector<Argument>>(
-        methodArguments(method, "InputArguments"));
+    auto args =
+        std::make_shared<const std::vector<Argument>>(methodArguments(method, "InputArguments"));
     std::lock_guard guard(argumentCacheMutex);
     argumentCache[method] = CachedArguments{changeGeneration, args};
     return args;

@@ -169,8 +169,7 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
         auto slot = std::make_shared<MethodCompletion::Slot>(state, run.index);
         MethodCompletion completion(slot);
         try {
-            (*run.handler)(run.context,
-                           std::move(request.methodsToCall[run.index].inputArguments),
+            (*run.handler)(run.context, std::move(request.methodsToCall[run.index].inputArguments),
                            completion);
         } catch (...) {
             completion(status::BadInternalError);

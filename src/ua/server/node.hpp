@@ -28,6 +28,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "ua/types/attribute_id.hpp"
 #include "ua/types/builtin.hpp"
 
 namespace pnp::ua::server {
@@ -48,36 +49,7 @@ enum class NodeClassBits : std::uint8_t {
     View = 128,
 };
 
-// Attribute ids (OPC 10000-6 Annex A.1).
-enum class AttributeId : UInt32 {
-    NodeId = 1,
-    NodeClass = 2,
-    BrowseName = 3,
-    DisplayName = 4,
-    Description = 5,
-    WriteMask = 6,
-    UserWriteMask = 7,
-    IsAbstract = 8,
-    Symmetric = 9,
-    InverseName = 10,
-    ContainsNoLoops = 11,
-    EventNotifier = 12,
-    Value = 13,
-    DataType = 14,
-    ValueRank = 15,
-    ArrayDimensions = 16,
-    AccessLevel = 17,
-    UserAccessLevel = 18,
-    MinimumSamplingInterval = 19,
-    Historizing = 20,
-    Executable = 21,
-    UserExecutable = 22,
-    DataTypeDefinition = 23,
-    RolePermissions = 24,
-    UserRolePermissions = 25,
-    AccessRestrictions = 26,
-    AccessLevelEx = 27,
-};
+using ua::AttributeId;  // ua/types/attribute_id.hpp
 
 // AccessLevelType bits (OPC 10000-3 §8.57).
 namespace access_level {

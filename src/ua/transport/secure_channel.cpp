@@ -280,8 +280,8 @@ bool ServerChannel::sendMessage(UInt32 requestId, Buffer&& message, bool isFault
         // Limits so small that not even a ServiceFault fits (found by the fuzzer): the
         // client cannot be answered, so the channel ends with an ERR.
         if (isFault) {
-            fail(status::BadResponseTooLarge,
-                 "a ServiceFault of " + std::to_string(body) + " bytes exceeds the client's limits");
+            fail(status::BadResponseTooLarge, "a ServiceFault of " + std::to_string(body) +
+                                                  " bytes exceeds the client's limits");
             return false;
         }
         return sendServiceFault(requestId, responseRequestHandle(message),

@@ -7,9 +7,9 @@
 // and thumbprint, MessageSecurityMode None).
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <optional>
-#include <algorithm>
 #include <span>
 #include <string>
 

@@ -8,11 +8,11 @@
 
 #include <algorithm>
 #include <bit>
-#include <memory>
-#include <type_traits>
 #include <cstring>
+#include <memory>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "ua/types/builtin.hpp"

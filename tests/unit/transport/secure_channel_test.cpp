@@ -507,8 +507,8 @@ TEST_F(OpenRequestTest, NotEvenAServiceFaultFitsClosesTheChannel) {
     ccfg.maxMessageSize = 24;
     ASSERT_EQ(openWith([](auto&) {}), StatusCode{});
     echo = false;
-    toServerRaw(rawMsg(2, 7, pattern(1), ChunkType::Final, server->channelId(),
-                       server->currentTokenId()));
+    toServerRaw(
+        rawMsg(2, 7, pattern(1), ChunkType::Final, server->channelId(), server->currentTokenId()));
     ASSERT_EQ(requests.size(), 1u);
     Buffer m = newMessageBuffer();
     BinaryEncoder e(m);
