@@ -35,6 +35,7 @@
 #include <thread>
 #include <vector>
 
+#include "support/raw_socket.hpp"
 #include "ua/client/client.hpp"
 #include "ua/server/server.hpp"
 #include "ua/transport/client_connection.hpp"
@@ -116,101 +117,8 @@ class LateCompleter {
     std::thread thread_;
 };
 
-// ---- a raw TCP connection ---------------------------------------------------------------------
-class RawSocket {
-  public:
-    explicit RawSocket(UInt16 port) {
-        fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        sockaddr_in a{};
-        a.sin_family = AF_INET;
-        a.sin_port = htons(port);
-        a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-        if (fd_ >= 0 && ::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-            ::close(fd_);
-            fd_ = -1;
-        }
-        if (fd_ >= 0) {
-            int one = 1;
-            ::setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-        }
-    }
-    ~RawSocket() { closeNow(); }
-    RawSocket(const RawSocket&) = delete;
-    RawSocket& operator=(const RawSocket&) = delete;
-
-    bool ok() const { return fd_ >= 0; }
-    int fd() const { return fd_; }
-    void closeNow() {
-        if (fd_ >= 0) ::close(fd_);
-        fd_ = -1;
-    }
-    // Close with a TCP reset instead of a FIN.
-    void resetNow() {
-        if (fd_ < 0) return;
-        linger l{1, 0};
-        ::setsockopt(fd_, SOL_SOCKET, SO_LINGER, &l, sizeof l);
-        closeNow();
-    }
-    bool send(const Buffer& b) { return send(b.data(), b.size()); }
-    bool send(const void* p, std::size_t n) {
-        auto c = static_cast<const char*>(p);
-        while (n > 0) {
-            ssize_t k = ::send(fd_, c, n, MSG_NOSIGNAL);
-            if (k <= 0) return false;
-            c += k;
-            n -= static_cast<std::size_t>(k);
-        }
-        return true;
-    }
-    // Reads until `in_` holds n bytes; false on EOF, error or deadline.
-    bool fill(std::size_t n, Deadline deadline) {
-        while (in_.size() < n) {
-            auto left =
-                std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
-            if (left.count() <= 0) return false;
-            pollfd p{fd_, POLLIN, 0};
-            if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return false;
-            Byte buf[65536];
-            ssize_t k = ::recv(fd_, buf, sizeof buf, 0);
-            if (k <= 0) {
-                eof_ = true;
-                return false;
-            }
-            in_.insert(in_.end(), buf, buf + k);
-        }
-        return true;
-    }
-    // The next whole chunk (header included).
-    std::optional<Buffer> readChunk(Deadline deadline = Clock::now() + 5s) {
-        if (!fill(8, deadline)) return std::nullopt;
-        UInt32 size = tp::getUInt32(in_.data() + 4);
-        if (size < 8 || size > (64u << 20) || !fill(size, deadline)) return std::nullopt;
-        Buffer c(in_.begin(), in_.begin() + size);
-        in_.erase(in_.begin(), in_.begin() + size);
-        return c;
-    }
-    // Reads until an ERR arrives; its code, or Good when none came before EOF / deadline.
-    StatusCode expectError(Deadline deadline = Clock::now() + 5s) {
-        while (auto c = readChunk(deadline)) {
-            if (tp::decodeMessageHeader(c->data()).type == tp::MessageType::Error)
-                return tp::decodeError(c->data() + 8, c->size() - 8).error;
-        }
-        return StatusCode{};
-    }
-    // True when the server closed the connection (EOF or reset) before the deadline.
-    bool waitClosed(Deadline deadline = Clock::now() + 5s) {
-        while (!eof_) {
-            in_.clear();
-            if (!fill(1, deadline) && !eof_) return false;
-        }
-        return true;
-    }
-
-  private:
-    int fd_ = -1;
-    Buffer in_;
-    bool eof_ = false;
-};
+// ---- a raw TCP connection: tests/support/raw_socket.hpp ----
+using test::RawSocket;
 
 // HEL/ACK and OpenSecureChannel by hand, then hand-made MSG chunks.
 class RawChannel {

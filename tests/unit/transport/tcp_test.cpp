@@ -18,6 +18,7 @@
 #include <set>
 #include <thread>
 
+#include "support/raw_socket.hpp"
 #include "ua/transport/client_connection.hpp"
 #include "ua/transport/tcp_server.hpp"
 #include "ua/types/extension_object.hpp"
@@ -106,105 +107,8 @@ class Handler : public ServiceHandler {
     std::vector<std::thread> workers;
 };
 
-// ---- a raw socket for misbehaving clients ----------------------------------------------
-class RawSocket {
-  public:
-    explicit RawSocket(UInt16 port) {
-        fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        sockaddr_in a{};
-        a.sin_family = AF_INET;
-        a.sin_port = htons(port);
-        a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-        if (::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-            ::close(fd_);
-            fd_ = -1;
-        }
-    }
-    ~RawSocket() { closeNow(); }
-    bool ok() const { return fd_ >= 0; }
-    void closeNow() {
-        if (fd_ >= 0) ::close(fd_);
-        fd_ = -1;
-    }
-    bool send(const Buffer& b) { return send(b.data(), b.size()); }
-    bool send(const void* p, std::size_t n) {
-        auto c = static_cast<const char*>(p);
-        while (n > 0) {
-            ssize_t k = ::send(fd_, c, n, MSG_NOSIGNAL);
-            if (k <= 0) return false;
-            c += k;
-            n -= static_cast<std::size_t>(k);
-        }
-        return true;
-    }
-    // Sends without blocking for longer than `limit` in total; false when the peer did not
-    // take everything in time.
-    bool trySend(const Buffer& b, std::chrono::milliseconds limit) {
-        auto end = Clock::now() + limit;
-        std::size_t off = 0;
-        while (off < b.size()) {
-            ssize_t k = ::send(fd_, b.data() + off, b.size() - off, MSG_NOSIGNAL | MSG_DONTWAIT);
-            if (k > 0) {
-                off += static_cast<std::size_t>(k);
-                continue;
-            }
-            if (k < 0 && errno != EAGAIN && errno != EWOULDBLOCK) return false;
-            auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - Clock::now());
-            if (left.count() <= 0) return false;
-            pollfd p{fd_, POLLOUT, 0};
-            ::poll(&p, 1, static_cast<int>(left.count()));
-        }
-        return true;
-    }
-    // Reads at least n more bytes into in_, false on EOF / error / timeout.
-    bool fill(std::size_t n, Deadline deadline) {
-        while (in_.size() < n) {
-            auto left =
-                std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
-            if (left.count() <= 0) return false;
-            pollfd p{fd_, POLLIN, 0};
-            if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return false;
-            Byte buf[65536];
-            ssize_t k = ::recv(fd_, buf, sizeof buf, 0);
-            if (k <= 0) {
-                eof_ = true;
-                return false;
-            }
-            in_.insert(in_.end(), buf, buf + k);
-        }
-        return true;
-    }
-    // The next whole message of the connection protocol.
-    std::optional<Buffer> readChunk(Deadline deadline = Clock::now() + 5s) {
-        if (!fill(8, deadline)) return std::nullopt;
-        UInt32 size = getUInt32(in_.data() + 4);
-        if (size < 8 || size > (64u << 20) || !fill(size, deadline)) return std::nullopt;
-        Buffer c(in_.begin(), in_.begin() + size);
-        in_.erase(in_.begin(), in_.begin() + size);
-        return c;
-    }
-    // True when the server closed the connection before the deadline.
-    bool waitClosed(Deadline deadline = Clock::now() + 5s) {
-        while (!eof_) {
-            in_.clear();
-            if (!fill(1, deadline) && !eof_) return false;
-        }
-        return true;
-    }
-    // Reads until an ERR arrives; returns its code (Good when none came).
-    StatusCode expectError(Deadline deadline = Clock::now() + 5s) {
-        while (auto c = readChunk(deadline)) {
-            if (decodeMessageHeader(c->data()).type == MessageType::Error)
-                return decodeError(c->data() + 8, c->size() - 8).error;
-        }
-        return StatusCode{};
-    }
-
-  private:
-    int fd_ = -1;
-    Buffer in_;
-    bool eof_ = false;
-};
+// ---- a raw socket for misbehaving clients: tests/support/raw_socket.hpp ----
+using test::RawSocket;
 
 // A raw socket that completed HEL/ACK/OPN through a ClientChannel and then sends hand-made
 // chunks (sequence numbers continue at 2).
