@@ -21,6 +21,19 @@ std::size_t readCapacity(const TransportLimits& l) {
     return std::max(l.receiveBufferSize, kMinBufferSize) + kReadSlack;
 }
 
+// Channel::feed(): bytes copied in as if they had been read from the socket.
+template <class Channel>
+void feedBytes(Channel& channel, const Byte* p, std::size_t n, TimePoint now) {
+    while (n > 0 && channel.state() != Channel::State::Closed) {
+        auto space = channel.readSpace();
+        std::size_t k = std::min(n, space.size());
+        std::memcpy(space.data(), p, k);
+        channel.received(k, now);
+        p += k;
+        n -= k;
+    }
+}
+
 template <class T>
 NodeId encodingId() {
     return NodeId(0, DataTypeInfo<T>::binaryEncodingId);
@@ -67,15 +80,7 @@ ServerChannel::ServerChannel(const ServerTransportConfig& config, Hooks& hooks, 
       lastReceive_(now) {}
 
 void ServerChannel::feed(const Byte* p, std::size_t n, TimePoint now) {
-    while (n > 0) {
-        if (state_ == State::Closed) return;
-        auto space = readSpace();
-        std::size_t k = std::min(n, space.size());
-        std::memcpy(space.data(), p, k);
-        received(k, now);
-        p += k;
-        n -= k;
-    }
+    feedBytes(*this, p, n, now);
 }
 
 void ServerChannel::received(std::size_t n, TimePoint now) {
@@ -355,15 +360,7 @@ void ClientChannel::start(TimePoint /*now*/) {
 }
 
 void ClientChannel::feed(const Byte* p, std::size_t n, TimePoint now) {
-    while (n > 0) {
-        if (state_ == State::Closed) return;
-        auto space = readSpace();
-        std::size_t k = std::min(n, space.size());
-        std::memcpy(space.data(), p, k);
-        received(k, now);
-        p += k;
-        n -= k;
-    }
+    feedBytes(*this, p, n, now);
 }
 
 void ClientChannel::received(std::size_t n, TimePoint now) {

@@ -136,16 +136,24 @@ void encodeMessageHeader(Byte* p, MessageType type, ChunkType chunkType, UInt32 
 }
 
 // ---- encode ----------------------------------------------------------------------------
-Buffer encodeMessage(const Hello& m) {
-    if (m.endpointUrl.size() > kMaxUrlLength)
-        throw TransportError(status::BadTcpEndpointUrlInvalid, "EndpointUrl too long");
-    Buffer b = startMessage(MessageType::Hello);
-    BinaryEncoder e(b);
+namespace {
+// The fields Hello and Acknowledge share, in their order (Part 6 §7.1.2.3 / §7.1.2.4).
+template <class M>
+void encodeBufferLimits(BinaryEncoder& e, const M& m) {
     e.number(m.protocolVersion);
     e.number(m.receiveBufferSize);
     e.number(m.sendBufferSize);
     e.number(m.maxMessageSize);
     e.number(m.maxChunkCount);
+}
+}  // namespace
+
+Buffer encodeMessage(const Hello& m) {
+    if (m.endpointUrl.size() > kMaxUrlLength)
+        throw TransportError(status::BadTcpEndpointUrlInvalid, "EndpointUrl too long");
+    Buffer b = startMessage(MessageType::Hello);
+    BinaryEncoder e(b);
+    encodeBufferLimits(e, m);
     e.lengthPrefixed(m.endpointUrl);
     finishMessage(b);
     return b;
@@ -154,11 +162,7 @@ Buffer encodeMessage(const Hello& m) {
 Buffer encodeMessage(const Acknowledge& m) {
     Buffer b = startMessage(MessageType::Acknowledge);
     BinaryEncoder e(b);
-    e.number(m.protocolVersion);
-    e.number(m.receiveBufferSize);
-    e.number(m.sendBufferSize);
-    e.number(m.maxMessageSize);
-    e.number(m.maxChunkCount);
+    encodeBufferLimits(e, m);
     finishMessage(b);
     return b;
 }
