@@ -398,15 +398,7 @@ TEST_F(ClientFake, DefaultDeadlineIsTheConfiguredRequestTimeout) {
 // ---- reconnect -----------------------------------------------------------------------------
 
 TEST_F(ClientFake, IdempotentCallIsRetriedOnANewChannelWithTheSameSession) {
-    std::atomic<int> drops{0};
-    server.setHook([&](const FakeServer::Request& r) {
-        if (r.is<ReadRequest>() && drops == 0) {
-            ++drops;
-            r.conn->close();
-            return true;
-        }
-        return false;
-    });
+    server.dropFirst<ReadRequest>();
     Client c;
     c.connect(server.url());
     EXPECT_EQ(c.readValue(kInt32), Variant(Int32{7}));
@@ -423,15 +415,7 @@ TEST_F(ClientFake, IdempotentCallIsRetriedOnANewChannelWithTheSameSession) {
 }
 
 TEST_F(ClientFake, NonIdempotentCallIsNotRetried) {
-    std::atomic<int> drops{0};
-    server.setHook([&](const FakeServer::Request& r) {
-        if (r.is<WriteRequest>() && drops == 0) {
-            ++drops;
-            r.conn->close();
-            return true;
-        }
-        return false;
-    });
+    server.dropFirst<WriteRequest>();
     Client c;
     c.connect(server.url());
     StatusCode s = statusOf([&] { c.writeValue(kInt32, Int32{5}); });
@@ -446,15 +430,7 @@ TEST_F(ClientFake, NonIdempotentCallIsNotRetried) {
 }
 
 TEST_F(ClientFake, RetryIdempotentCanBeDisabled) {
-    std::atomic<int> drops{0};
-    server.setHook([&](const FakeServer::Request& r) {
-        if (r.is<ReadRequest>() && drops == 0) {
-            ++drops;
-            r.conn->close();
-            return true;
-        }
-        return false;
-    });
+    server.dropFirst<ReadRequest>();
     ClientConfig cfg;
     cfg.reconnect.retryIdempotent = false;
     Client c(cfg);

@@ -77,6 +77,16 @@ class FakeServer : public transport::ServiceHandler {
         std::lock_guard lock(mutex_);
         hook_ = std::move(h);
     }
+    // The first request of type Req closes its connection instead of being answered.
+    template <class Req>
+    void dropFirst() {
+        auto dropped = std::make_shared<std::atomic<bool>>(false);
+        setHook([dropped](const Request& r) {
+            if (!r.is<Req>() || dropped->exchange(true)) return false;
+            r.conn->close();
+            return true;
+        });
+    }
     void setValue(const NodeId& id, Variant v) {
         std::lock_guard lock(mutex_);
         values_[id] = std::move(v);
