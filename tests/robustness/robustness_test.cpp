@@ -56,6 +56,8 @@ constexpr auto kHelloTimeout = 1000ms;
 constexpr UInt32 kReceiveBufferSize = 8192;
 constexpr UInt32 kMaxMessageSize = 256 * 1024;
 constexpr UInt32 kMaxChunkCount = 64;
+// Server-wide bytes of incomplete messages: room for one large partial message, not two.
+constexpr std::size_t kIncompleteBudget = kMaxMessageSize * 3 / 2;
 constexpr Int32 kConstant = 4711;
 
 template <class T>
@@ -333,6 +335,7 @@ class Robustness : public ::testing::Test {
         cfg.transport.maxChunkCount = kMaxChunkCount;
         cfg.transport.helloTimeout = kHelloTimeout;
         cfg.transport.maxConnections = 1000;
+        cfg.transport.maxIncompleteMessageBytes = kIncompleteBudget;
         completer_ = new LateCompleter();
         server_ = new server::Server(cfg);
         auto& as = server_->addressSpace();
@@ -603,6 +606,33 @@ TEST_F(Robustness, MessageBeyondMaxMessageSizeInManyChunks) {
     EXPECT_GT(sent, kMaxMessageSize);
     EXPECT_EQ(c.sock.expectError(), status::BadTcpMessageTooLarge);
     EXPECT_TRUE(c.sock.waitClosed());
+}
+
+// Many clients trickling in large messages: together they may hold no more than the
+// server-wide budget; the one that goes beyond it is closed, the others are unaffected.
+TEST_F(Robustness, PartialMessagesShareAServerWideBudget) {
+    const Buffer part(kReceiveBufferSize - tp::kSymmetricHeaderSize, 0x46);
+    const std::size_t chunksEach = (kMaxMessageSize * 7 / 8) / part.size();  // < MaxMessageSize
+    RawChannel a(port()), b(port());
+    ASSERT_TRUE(a.open());
+    ASSERT_TRUE(b.open());
+    for (std::size_t i = 0; i < chunksEach; ++i)
+        ASSERT_TRUE(a.sock.send(a.chunk(part, tp::ChunkType::Intermediate, 90)));
+    std::this_thread::sleep_for(300ms);  // the server has read all of a's chunks
+    for (std::size_t i = 0; i < chunksEach; ++i)
+        if (!b.sock.send(b.chunk(part, tp::ChunkType::Intermediate, 91))) break;
+    EXPECT_EQ(b.sock.expectError(), status::BadTcpNotEnoughResources);
+    EXPECT_TRUE(b.sock.waitClosed());
+    // a still holds its part and is still open.
+    EXPECT_EQ(a.sock.expectError(tp::Clock::now() + 200ms), StatusCode{});
+    // When a goes away its bytes come back: a third client can do what b could not.
+    a.sock.closeNow();
+    std::this_thread::sleep_for(200ms);
+    RawChannel c(port());
+    ASSERT_TRUE(c.open());
+    for (std::size_t i = 0; i < chunksEach; ++i)
+        ASSERT_TRUE(c.sock.send(c.chunk(part, tp::ChunkType::Intermediate, 92)));
+    EXPECT_EQ(c.sock.expectError(tp::Clock::now() + 200ms), StatusCode{});
 }
 
 TEST_F(Robustness, TooManyChunks) {

@@ -142,8 +142,7 @@ MessageAssembler::Event MessageAssembler::add(const SecureChunk& chunk) {
 
     if (chunk.chunkType == ChunkType::Abort) {
         // Body: Error (UInt32) + Reason (String). The partial message is discarded.
-        chunks_ = 0;
-        assembly_.clear();
+        reset();
         ev.result = Result::Aborted;
         if (chunk.bodySize < 8)
             throw TransportError(status::BadDecodingError, "abort chunk too short");
@@ -160,15 +159,13 @@ MessageAssembler::Event MessageAssembler::add(const SecureChunk& chunk) {
     std::size_t count = chunks_ + 1;
     std::size_t total = (chunks_ > 0 ? assembly_.size() : 0) + chunk.bodySize;
     if (limits_.maxChunkCount && count > limits_.maxChunkCount) {
-        chunks_ = 0;
-        assembly_.clear();
+        reset();
         throw TransportError(
             status::BadTcpMessageTooLarge,
             "message exceeds " + std::to_string(limits_.maxChunkCount) + " chunks");
     }
     if (limits_.maxMessageSize && total > limits_.maxMessageSize) {
-        chunks_ = 0;
-        assembly_.clear();
+        reset();
         throw TransportError(
             status::BadTcpMessageTooLarge,
             "message exceeds " + std::to_string(limits_.maxMessageSize) + " bytes");
@@ -187,10 +184,21 @@ MessageAssembler::Event MessageAssembler::add(const SecureChunk& chunk) {
         type_ = chunk.type;
         requestId_ = chunk.requestId;
     }
+    if (budget_) {
+        if (!budget_->tryTake(chunk.bodySize)) {
+            reset();
+            throw TransportError(status::BadTcpNotEnoughResources,
+                                 "the server's memory for incoming messages (" +
+                                     std::to_string(budget_->limit()) + " bytes) is in use");
+        }
+        held_ += chunk.bodySize;
+    }
     assembly_.insert(assembly_.end(), chunk.body, chunk.body + chunk.bodySize);
     chunks_ = count;
     if (chunk.chunkType == ChunkType::Intermediate) return ev;  // Incomplete
 
+    // Complete: handed out for processing, so it no longer counts as incomplete.
+    release();
     chunks_ = 0;
     ev.result = Result::Complete;
     ev.body = assembly_.data();

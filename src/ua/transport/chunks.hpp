@@ -7,6 +7,8 @@
 // Everything throws TransportError with the status the peer should get in an ERR message.
 #pragma once
 
+#include <algorithm>
+#include <atomic>
 #include <cstddef>
 #include <cstring>
 #include <memory>
@@ -111,6 +113,30 @@ class SequenceGenerator {
 
 // Reassembles messages from chunks. Chunks of different messages must not be interleaved:
 // while a message is incomplete, every chunk shall carry its message type and request id.
+// Bytes that all connections of a server together may hold in partially received
+// (multi-chunk) messages. MaxMessageSize bounds one message; this bounds their sum, which
+// would otherwise be maxConnections x MaxMessageSize (1000 x 16 MiB) for clients that
+// trickle in large messages. Thread-safe.
+class MemoryBudget {
+  public:
+    explicit MemoryBudget(std::size_t limit) : limit_(limit) {}
+    // Takes n bytes if they fit; false (nothing taken) otherwise.
+    bool tryTake(std::size_t n) {
+        std::size_t used = used_.load(std::memory_order_relaxed);
+        do {
+            if (n > limit_ - std::min(used, limit_)) return false;
+        } while (!used_.compare_exchange_weak(used, used + n, std::memory_order_relaxed));
+        return true;
+    }
+    void give(std::size_t n) { used_.fetch_sub(n, std::memory_order_relaxed); }
+    std::size_t used() const { return used_.load(std::memory_order_relaxed); }
+    std::size_t limit() const { return limit_; }
+
+  private:
+    std::atomic<std::size_t> used_{0};
+    std::size_t limit_;
+};
+
 class MessageAssembler {
   public:
     struct Limits {
@@ -134,7 +160,18 @@ class MessageAssembler {
 
     MessageAssembler() = default;
     explicit MessageAssembler(Limits limits) : limits_(limits) {}
+    ~MessageAssembler() { release(); }
+    MessageAssembler(const MessageAssembler&) = delete;
+    MessageAssembler& operator=(const MessageAssembler&) = delete;
     void setLimits(Limits limits) { limits_ = limits; }
+    // Partial messages take their bytes from `budget` (shared by many assemblers, outlives
+    // this one); when it is exhausted add() throws BadTcpNotEnoughResources.
+    void setBudget(MemoryBudget* budget) { budget_ = budget; }
+    // Drops an incomplete message and stops using the budget (which may go away next).
+    void leaveBudget() {
+        reset();
+        budget_ = nullptr;
+    }
 
     // Throws TransportError: BadTcpMessageTooLarge (message size / chunk count limits),
     // BadTcpMessageTypeInvalid (a chunk of another message type while one is incomplete),
@@ -147,7 +184,18 @@ class MessageAssembler {
     Buffer& assemblyBuffer() { return assembly_; }
 
   private:
+    void reset() {
+        chunks_ = 0;
+        assembly_.clear();
+        release();
+    }
+    void release() {
+        if (budget_ && held_) budget_->give(held_);
+        held_ = 0;
+    }
     Limits limits_;
+    MemoryBudget* budget_ = nullptr;
+    std::size_t held_ = 0;  // bytes taken from budget_ for the incomplete message
     Buffer assembly_;
     std::size_t chunks_ = 0;  // chunks of the incomplete message
     MessageType type_ = MessageType::Message;

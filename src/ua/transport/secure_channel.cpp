@@ -72,12 +72,15 @@ bool exceedsPeerLimits(const NegotiatedLimits& l, std::size_t body, std::size_t 
 // =======================================================================================
 // ServerChannel
 // =======================================================================================
-ServerChannel::ServerChannel(const ServerTransportConfig& config, Hooks& hooks, TimePoint now)
+ServerChannel::ServerChannel(const ServerTransportConfig& config, Hooks& hooks, TimePoint now,
+                             MemoryBudget* budget)
     : config_(config),
       hooks_(hooks),
       reader_(readCapacity(config), kPreHelloMaxChunk),
       started_(now),
-      lastReceive_(now) {}
+      lastReceive_(now) {
+    assembler_.setBudget(budget);
+}
 
 void ServerChannel::feed(const Byte* p, std::size_t n, TimePoint now) {
     feedBytes(*this, p, n, now);

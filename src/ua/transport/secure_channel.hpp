@@ -67,6 +67,10 @@ struct ServerTransportConfig : TransportLimits {
     // Connections beyond this are refused with an ERR BadTcpServerTooBusy. Worst-case
     // memory is about maxConnections * (maxMessageSize + receiveBufferSize + 4 MiB).
     std::size_t maxConnections = 1000;
+    // All connections together hold at most this many bytes of partially received
+    // (multi-chunk) messages; a chunk beyond it ends its connection with ERR
+    // BadTcpNotEnoughResources (see MemoryBudget).
+    std::size_t maxIncompleteMessageBytes = 256u << 20;
     // A connection that has not completed HEL/ACK and OpenSecureChannel within this time is
     // closed (ERR BadTimeout).
     std::chrono::milliseconds helloTimeout{10'000};
@@ -118,7 +122,10 @@ class ServerChannel {
 
     enum class State { AwaitHello, AwaitOpen, Open, Closed };
 
-    ServerChannel(const ServerTransportConfig& config, Hooks& hooks, TimePoint now);
+    // `budget`: shared by the server's channels for partially received messages (may be
+    // null: no server-wide limit); it must outlive the channel.
+    ServerChannel(const ServerTransportConfig& config, Hooks& hooks, TimePoint now,
+                  MemoryBudget* budget = nullptr);
 
     // Input: read into readSpace(), then received(n). feed() copies (tests).
     std::span<Byte> readSpace() { return reader_.readSpace(); }
@@ -140,6 +147,9 @@ class ServerChannel {
     void close();
     // Sends ERR `status` and closes.
     void fail(StatusCode status, const std::string& reason);
+    // The connection is gone: gives back what an incomplete message held of the budget
+    // passed to the constructor, and stops using it.
+    void leaveBudget() { assembler_.leaveBudget(); }
 
     State state() const { return state_; }
     bool isClosed() const { return state_ == State::Closed; }

@@ -73,6 +73,8 @@ struct TcpServer::Impl {
     // All socket operations run on the network thread (other threads post to it), so the
     // reactor's per-descriptor locks can go; posting and registration stay thread-safe.
     asio::io_context io{ASIO_CONCURRENCY_HINT_UNSAFE_IO};
+    // Declared before the connections' owners: every channel gives its bytes back first.
+    MemoryBudget incompleteMessages{config.maxIncompleteMessageBytes};
     tcp::acceptor acceptor{io};
     asio::steady_timer housekeepingTimer{io};
     asio::steady_timer acceptRetryTimer{io};
@@ -103,7 +105,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         : server_(server),
           socket_(std::move(socket)),
           peer_(std::move(peer)),
-          channel_(server.config, *this, Clock::now()),
+          channel_(server.config, *this, Clock::now(), &server.incompleteMessages),
           rejected_(rejected) {}
 
     bool rejected() const { return rejected_; }
@@ -310,6 +312,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         // keeps a ServerConnection the upper layer still holds from touching the
         // io_context after the server is gone.
         socket_.reset();
+        channel_.leaveBudget();  // the server's budget may be gone before this connection
         for (const auto& b : pending_) queuedBytes_ -= b.size();
         pending_.clear();
         server_.removeConnection(self(), notify && !rejected_);

@@ -293,6 +293,46 @@ TEST_F(AssemblerTest, SingleChunkIsNotCopied) {
     EXPECT_FALSE(ev.assembled);
 }
 
+// Partial messages of several connections share one budget; what they hold comes back when
+// a message completes, is aborted, fails, or the assembler goes away.
+TEST_F(AssemblerTest, SharedBudgetForIncompleteMessages) {
+    MemoryBudget budget(10000);
+    MessageAssembler a, b;
+    a.setBudget(&budget);
+    b.setBudget(&budget);
+    EXPECT_EQ(a.add(chunk(ChunkType::Intermediate, 1, pattern(6000))).result,
+              MessageAssembler::Result::Incomplete);
+    EXPECT_EQ(budget.used(), 6000u);
+    EXPECT_EQ(statusOf([&] { b.add(chunk(ChunkType::Intermediate, 2, pattern(6000))); }),
+              status::BadTcpNotEnoughResources);
+    EXPECT_EQ(budget.used(), 6000u);  // b took nothing
+    auto ev = a.add(chunk(ChunkType::Final, 1, pattern(3000)));
+    EXPECT_EQ(ev.result, MessageAssembler::Result::Complete);
+    EXPECT_EQ(ev.size, 9000u);
+    EXPECT_EQ(budget.used(), 0u);  // complete: handed out
+    // Now b fits; an abort chunk gives its bytes back.
+    EXPECT_EQ(b.add(chunk(ChunkType::Intermediate, 3, pattern(6000))).result,
+              MessageAssembler::Result::Incomplete);
+    Buffer abortBody(8, 0);
+    EXPECT_EQ(b.add(chunk(ChunkType::Abort, 3, abortBody)).result,
+              MessageAssembler::Result::Aborted);
+    EXPECT_EQ(budget.used(), 0u);
+    // A single-chunk message never touches the budget.
+    EXPECT_EQ(b.add(chunk(ChunkType::Final, 4, pattern(20000))).result,
+              MessageAssembler::Result::Complete);
+    EXPECT_EQ(budget.used(), 0u);
+    {
+        MessageAssembler c;
+        c.setBudget(&budget);
+        c.add(chunk(ChunkType::Intermediate, 5, pattern(4000)));
+        EXPECT_EQ(budget.used(), 4000u);
+    }
+    EXPECT_EQ(budget.used(), 0u);  // destroyed with an incomplete message
+    a.add(chunk(ChunkType::Intermediate, 6, pattern(4000)));
+    a.leaveBudget();
+    EXPECT_EQ(budget.used(), 0u);
+}
+
 TEST_F(AssemblerTest, MessageSizeLimit) {
     MessageAssembler a({1000, 0});
     EXPECT_EQ(a.add(chunk(ChunkType::Intermediate, 1, pattern(600))).result,
