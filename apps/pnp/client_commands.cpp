@@ -648,6 +648,10 @@ std::pair<std::vector<Argument>, std::vector<Argument>> methodArguments(uac::Cli
         paths.push_back(std::move(p));
     }
     auto res = c.translateBrowsePaths(paths);
+    // An unknown method node would otherwise look like a method without arguments.
+    if (!res.empty() && (res[0].statusCode == StatusCode(status::BadNodeIdUnknown) ||
+                         res[0].statusCode == StatusCode(status::BadNodeIdInvalid)))
+        throw uac::Error(res[0].statusCode, "no method node " + method.toString());
     std::vector<ReadValueId> reads;
     std::vector<int> which;
     for (int i = 0; i < 2 && i < static_cast<int>(res.size()); ++i) {

@@ -300,7 +300,7 @@ class Client::Impl {
             return decodeIncoming<ResponseOf<Req>>(r, service, config.decodeLimits);
         } catch (const TransportError& e) {
             connectionLost(e.status(), done);
-            throw Error(e.status(), std::string(service) + ": " + e.what());
+            throw Error(e.status(), std::string(service) + ": " + e.message());
         }
     }
 
@@ -309,7 +309,7 @@ class Client::Impl {
             conn = transport::ClientConnection::connect(url, transportConfig(), deadline);
             ++generation;
         } catch (const TransportError& e) {
-            throw Error(e.status(), "cannot connect to " + url + ": " + e.what());
+            throw Error(e.status(), "cannot connect to " + url + ": " + e.message());
         }
         lastReceive = Clock::now();
     }
@@ -488,11 +488,11 @@ class Client::Impl {
                 return r;
             } catch (const TransportError& e) {
                 if (e.status() == status::BadRequestTooLarge && conn && conn->isOpen())
-                    throw Error(e.status(), std::string(service) + ": " + e.what());
+                    throw Error(e.status(), std::string(service) + ": " + e.message());
                 connectionLost(e.status(), done);
                 bool retry = attempt == 0 && config.reconnect.enabled &&
                              (!sent || (idempotent && config.reconnect.retryIdempotent));
-                if (!retry) throw Error(e.status(), std::string(service) + ": " + e.what());
+                if (!retry) throw Error(e.status(), std::string(service) + ": " + e.message());
                 ++stats.retries;
             }
         }
@@ -516,11 +516,11 @@ class Client::Impl {
                 return;
             } catch (const TransportError& e) {
                 if (e.status() == status::BadRequestTooLarge && conn && conn->isOpen())
-                    throw Error(e.status(), std::string(service) + ": " + e.what());
+                    throw Error(e.status(), std::string(service) + ": " + e.message());
                 connectionLost(e.status(), done);
                 // Not sent: safe to send again on a new connection.
                 if (attempt > 0 || !config.reconnect.enabled)
-                    throw Error(e.status(), std::string(service) + ": " + e.what());
+                    throw Error(e.status(), std::string(service) + ": " + e.message());
                 ++stats.retries;
             }
         }
@@ -817,7 +817,8 @@ IncomingResponse Client::discoveryRoundTrip(std::string_view url, EncodeRef enco
             }
         }
     } catch (const TransportError& e) {
-        throw Error(e.status(), std::string(service) + " at " + std::string(url) + ": " + e.what());
+        throw Error(e.status(),
+                    std::string(service) + " at " + std::string(url) + ": " + e.message());
     }
 }
 

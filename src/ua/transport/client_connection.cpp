@@ -89,7 +89,7 @@ int tcpConnect(const EndpointUrl& url, Deadline deadline) {
     if (timedOut) throw TransportError(status::BadTimeout, "TCP connect to " + url.host);
     if (fd < 0) {
         throw TransportError(status::BadCommunicationError,
-                             "cannot connect to " + url.host + ":" + port + ": " + lastError);
+                             "TCP connect to " + url.host + ":" + port + ": " + lastError);
     }
     int one = 1;
     ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);

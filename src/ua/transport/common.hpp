@@ -51,11 +51,15 @@ inline bool deadlinePassed(Deadline deadline) {
 // Apart from BadRequestTooLarge, a TransportError means the connection is closed.
 class TransportError : public std::runtime_error {
   public:
-    TransportError(StatusCode status, const std::string& what);
+    // what() reads "<message>: <status>".
+    TransportError(StatusCode status, const std::string& message);
     StatusCode status() const noexcept { return status_; }
+    // The message without the status (for wrapping into another error that adds it).
+    const std::string& message() const noexcept { return message_; }
 
   private:
     StatusCode status_;
+    std::string message_;
 };
 
 // Part 6 §7.1.2.3: buffer sizes shall be at least 8192 bytes.

@@ -100,7 +100,7 @@ void ServerChannel::received(std::size_t n, TimePoint now) {
             handleChunk(*chunk, now);
         }
     } catch (const TransportError& e) {
-        fail(e.status(), e.what());
+        fail(e.status(), e.message());
     } catch (const DecodeError& e) {
         fail(status::BadDecodingError, e.what());
     } catch (const std::exception& e) {

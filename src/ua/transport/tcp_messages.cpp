@@ -7,9 +7,10 @@
 
 namespace pnp::ua::transport {
 
-TransportError::TransportError(StatusCode status, const std::string& what)
-    : std::runtime_error(what.empty() ? status.toString() : what + ": " + status.toString()),
-      status_(status) {}
+TransportError::TransportError(StatusCode status, const std::string& message)
+    : std::runtime_error(message.empty() ? status.toString() : message + ": " + status.toString()),
+      status_(status),
+      message_(message) {}
 
 namespace {
 
