@@ -158,6 +158,17 @@ class ChannelPair : public ::testing::Test {
         return m;
     }
     void toServerRaw(const Buffer& b) { server->feed(b.data(), b.size(), now); }
+    // A response message: the start of a ResponseHeader (Timestamp, RequestHandle) and
+    // `extra` more bytes.
+    static Buffer responseWithHandle(UInt32 requestHandle, std::size_t extra) {
+        Buffer m = newMessageBuffer();
+        BinaryEncoder e(m);
+        encode(e, kEchoResponse);
+        encode(e, DateTime::now());
+        encode(e, requestHandle);
+        m.resize(m.size() + extra);
+        return m;
+    }
 
     ServerTransportConfig scfg;
     ClientConfig ccfg;
@@ -339,13 +350,7 @@ TEST_F(ChannelPair, ResponseTooLargeBecomesServiceFault) {
     pump();
     ASSERT_EQ(requests.size(), 1u);
     // A "response" with a ResponseHeader (Timestamp, RequestHandle 777) and a big body.
-    Buffer m = newMessageBuffer();
-    BinaryEncoder e(m);
-    encode(e, kEchoResponse);
-    encode(e, DateTime::now());
-    encode(e, UInt32{777});
-    m.resize(m.size() + 60000);
-    EXPECT_TRUE(server->send(requests[0], std::move(m)));
+    EXPECT_TRUE(server->send(requests[0], responseWithHandle(777, 60000)));
     pump();
     ASSERT_EQ(cs.responses.size(), 1u);
     EXPECT_EQ(cs.responses[0].typeId, NodeId(0, DataTypeInfo<ServiceFault>::binaryEncodingId));
@@ -510,13 +515,7 @@ TEST_F(OpenRequestTest, NotEvenAServiceFaultFitsClosesTheChannel) {
     toServerRaw(
         rawMsg(2, 7, pattern(1), ChunkType::Final, server->channelId(), server->currentTokenId()));
     ASSERT_EQ(requests.size(), 1u);
-    Buffer m = newMessageBuffer();
-    BinaryEncoder e(m);
-    encode(e, kEchoResponse);
-    encode(e, DateTime::now());
-    encode(e, UInt32{778});
-    m.resize(m.size() + 100);
-    EXPECT_FALSE(server->send(requests[0], std::move(m)));
+    EXPECT_FALSE(server->send(requests[0], responseWithHandle(778, 100)));
     EXPECT_TRUE(server->isClosed());
     EXPECT_EQ(server->closeStatus(), status::BadResponseTooLarge);
 }
