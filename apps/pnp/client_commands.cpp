@@ -226,6 +226,22 @@ std::optional<BuiltinType> ns0BuiltinType(UInt32 id) {
     }
 }
 
+// The node on the other end of the first inverse reference of type `referenceType` (exactly,
+// no subtypes) of `node` on this server: a DataType's supertype (HasSubtype), an encoding's
+// DataType (HasEncoding).
+std::optional<NodeId> inverseTarget(uac::Client& c, const NodeId& node, UInt32 referenceType) {
+    BrowseDescription d;
+    d.nodeId = node;
+    d.browseDirection = BrowseDirection::Inverse;
+    d.referenceTypeId = NodeId(0, referenceType);
+    d.includeSubtypes = false;
+    d.resultMask = 0x3F;
+    BrowseResult r = c.browse(d);
+    if (r.statusCode.isBad() || r.references.empty() || !r.references[0].nodeId.isLocal())
+        return std::nullopt;
+    return r.references[0].nodeId.nodeId;
+}
+
 // The built-in type that carries values of DataType `dataType`: known ids directly, others by
 // following HasSubtype upwards. The abstract Number / Integer / UInteger take the type of
 // `current` when it has one (a Variable's value), or are Variants (a structure field).
@@ -246,16 +262,9 @@ BuiltinType builtinTypeOf(uac::Client& c, NodeId dataType, const Variant& curren
             }
             if (findCodecByDataTypeId(id) != nullptr) return BuiltinType::ExtensionObject;
         }
-        BrowseDescription d;
-        d.nodeId = dataType;
-        d.browseDirection = BrowseDirection::Inverse;
-        d.referenceTypeId = NodeId(0, ns0::HasSubtype);
-        d.includeSubtypes = false;
-        d.resultMask = 0x3F;
-        BrowseResult r = c.browse(d);
-        if (r.statusCode.isBad() || r.references.empty() || !r.references[0].nodeId.isLocal())
-            break;
-        dataType = r.references[0].nodeId.nodeId;
+        auto supertype = inverseTarget(c, dataType, ns0::HasSubtype);
+        if (!supertype) break;
+        dataType = *supertype;
     }
     throw UsageError("cannot tell the built-in type of DataType " + dataType.toString() +
                      "; give it with --type");
@@ -351,16 +360,7 @@ class ServerTypeCatalog final : public TypeCatalog {
     }
 
     NodeId dataTypeOfEncoding(const NodeId& encodingId) override {
-        BrowseDescription b;
-        b.nodeId = encodingId;
-        b.browseDirection = BrowseDirection::Inverse;
-        b.referenceTypeId = NodeId(0, ns0::HasEncoding);
-        b.includeSubtypes = false;
-        b.resultMask = 0x3F;
-        BrowseResult r = c_.browse(b);
-        if (r.statusCode.isBad() || r.references.empty() || !r.references[0].nodeId.isLocal())
-            return {};
-        return r.references[0].nodeId.nodeId;
+        return inverseTarget(c_, encodingId, ns0::HasEncoding).value_or(NodeId());
     }
 
   private:
