@@ -211,14 +211,17 @@ void ClientConnection::write(Buffer&& bytes) {
                                                      : status::BadCommunicationError,
                    "send: " + errnoText(err));
     }
-    bytes.clear();
-    spare_ = std::move(bytes);
+    // Kept for the next request's memory; a large one is not: one big request should not
+    // pin its memory.
+    constexpr std::size_t kKeepUpTo = 64 * 1024;
+    if (bytes.capacity() <= kKeepUpTo) {
+        bytes.clear();
+        spare_ = std::move(bytes);
+    }
 }
 
 Buffer ClientConnection::messageBuffer() {
-    // Large buffers are not kept: one big request should not pin its memory.
-    constexpr std::size_t kKeepUpTo = 64 * 1024;
-    if (spare_.capacity() == 0 || spare_.capacity() > kKeepUpTo) return newMessageBuffer();
+    if (spare_.capacity() == 0) return newMessageBuffer();
     Buffer b = std::move(spare_);
     spare_ = Buffer();
     b.resize(kSymmetricHeaderSize);
