@@ -1,7 +1,18 @@
 #include "ua/transport/tcp_server.hpp"
 
+#include <fcntl.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/uio.h>
+#include <unistd.h>
+
+#include <algorithm>
 #include <asio.hpp>
 #include <atomic>
+#include <cerrno>
+#include <condition_variable>
+#include <future>
+#include <mutex>
 #include <optional>
 #include <thread>
 #include <unordered_set>
@@ -17,28 +28,31 @@ namespace {
 // for the peer to close, so that the kernel does not answer unread data with a reset that
 // could destroy the ERR before the client read it.
 constexpr std::chrono::milliseconds kLinger{2000};
-// Period of the sweep over all connections (hello / idle timeouts, token expiry, linger).
+// Period of the sweep over all connections (hello / idle timeouts, token expiry).
 constexpr std::chrono::milliseconds kHousekeeping{100};
+// A connection thread blocked in recv() / send() wakes at least this often to notice a
+// close or stop requested by another thread and output queued by other threads.
+constexpr std::chrono::milliseconds kConnectionPoll{100};
 // Backpressure: while more than this many response bytes wait for the socket, the
 // connection stops reading requests (a client that sends but never reads cannot make the
 // server queue without bound).
 constexpr std::size_t kMaxQueuedOutput = 4u << 20;
+// Buffers handed to one sendmsg() call.
+constexpr std::size_t kMaxIov = 64;
 
 using asio::ip::tcp;
-
-// A buffer sequence over a vector of asio::const_buffer, cheap to copy (the composed write
-// operation keeps a copy of the sequence; copying a std::vector would allocate).
-struct BufferView {
-    const asio::const_buffer* b;
-    const asio::const_buffer* e;
-    const asio::const_buffer* begin() const { return b; }
-    const asio::const_buffer* end() const { return e; }
-};
 
 std::string endpointString(const tcp::endpoint& ep) {
     auto a = ep.address();
     std::string s = a.is_v6() ? "[" + a.to_string() + "]" : a.to_string();
     return s + ":" + std::to_string(ep.port());
+}
+
+void setReceiveTimeout(int fd, std::chrono::milliseconds period) {
+    timeval tv{};
+    tv.tv_sec = static_cast<time_t>(period.count() / 1000);
+    tv.tv_usec = static_cast<suseconds_t>((period.count() % 1000) * 1000);
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
 }
 
 }  // namespace
@@ -60,19 +74,21 @@ struct TcpServer::Impl {
     void scheduleHousekeeping();
     void housekeeping();
     void scheduleTick(std::uint64_t generation);
-    void shutdownAll();
     void removeConnection(const std::shared_ptr<TcpServerConnection>& c, bool notify);
+    void threadStarted();
+    void threadFinished();
     UInt32 newChannelId() {
         UInt32 id = nextChannelId++;
         if (nextChannelId == 0) nextChannelId = 1;
         return id == 0 ? newChannelId() : id;
     }
+    bool holdsNetworkLock() const;
 
     ServerTransportConfig config;
     ServiceHandler& handler;
-    // All socket operations run on the network thread (other threads post to it), so the
-    // reactor's per-descriptor locks can go; posting and registration stay thread-safe.
-    asio::io_context io{ASIO_CONCURRENCY_HINT_UNSAFE_IO};
+    // The service thread: accepts, runs the timers and the functions post()ed to the
+    // network thread. Connections do their own I/O on their own threads.
+    asio::io_context io;
     // Declared before the connections' owners: every channel gives its bytes back first.
     MemoryBudget incompleteMessages{config.maxIncompleteMessageBytes};
     tcp::acceptor acceptor{io};
@@ -80,13 +96,19 @@ struct TcpServer::Impl {
     asio::steady_timer acceptRetryTimer{io};
     asio::steady_timer tickTimer{io};
     std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
-    std::thread thread;
+    std::thread serviceThread;
     std::atomic<bool> running{false};
     UInt16 boundPort = 0;
 
-    // Network thread only.
+    // The network lock: held by whichever thread runs the protocol or the upper layer
+    // (ServiceHandler, post(), ticks). "The network thread" is the thread holding it.
+    std::mutex networkMutex;
+    // Guarded by networkMutex.
+    bool stopping = false;
     std::unordered_set<std::shared_ptr<TcpServerConnection>> connections;
     std::vector<std::shared_ptr<TcpServerConnection>> sweepList;
+    // Connections that queued output while the lock was held: written when it is released.
+    std::vector<std::shared_ptr<TcpServerConnection>> dirty;
     std::size_t activeConnections = 0;  // without the rejected ones lingering
     std::size_t rejectedConnections = 0;
     UInt32 nextChannelId = 1;
@@ -94,19 +116,53 @@ struct TcpServer::Impl {
     std::function<void()> tickFn;
     std::uint64_t tickGeneration = 0;
 
+    // Connection threads still running (stop() waits for 0).
+    std::mutex threadsMutex;
+    std::condition_variable threadsDone;
+    std::size_t liveThreads = 0;
+
     std::atomic<std::size_t> connectionCount{0};
 };
 
+namespace {
+thread_local const void* t_networkLockHolder = nullptr;  // the TcpServer::Impl
+}
+
+bool TcpServer::Impl::holdsNetworkLock() const { return t_networkLockHolder == this; }
+
+// Holds the network lock; on release, writes what the connections queued meanwhile
+// (without blocking: a connection thread finishes what the socket does not take at once).
+class NetworkLock {
+  public:
+    explicit NetworkLock(TcpServer::Impl& s) : s_(s), lock_(s.networkMutex) {
+        t_networkLockHolder = &s_;
+    }
+    ~NetworkLock() { unlock(); }
+    NetworkLock(const NetworkLock&) = delete;
+    NetworkLock& operator=(const NetworkLock&) = delete;
+    void unlock();
+
+  private:
+    TcpServer::Impl& s_;
+    std::unique_lock<std::mutex> lock_;
+};
+
 // =======================================================================================
+// One accepted connection and its thread. The thread blocks in recv() (no event loop
+// between the socket and the protocol: a request costs the same two system calls as a
+// plain blocking echo), runs the secure channel and the upper layer under the network
+// lock and writes the responses itself.
 class TcpServerConnection final : public ServerConnection, private ServerChannel::Hooks {
   public:
-    TcpServerConnection(TcpServer::Impl& server, tcp::socket socket, std::string peer,
-                        bool rejected)
+    TcpServerConnection(TcpServer::Impl& server, int fd, std::string peer, bool rejected)
         : server_(server),
-          socket_(std::move(socket)),
+          fd_(fd),
           peer_(std::move(peer)),
           channel_(server.config, *this, Clock::now(), &server.incompleteMessages),
           rejected_(rejected) {}
+    ~TcpServerConnection() override {
+        if (fd_ >= 0) ::close(fd_);
+    }
 
     bool rejected() const { return rejected_; }
 
@@ -120,63 +176,119 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         if (message.size() < kSymmetricHeaderSize)
             throw std::invalid_argument("ServerConnection::send: buffer without header space");
         if (isClosed()) return;
-        if (server_.io.get_executor().running_in_this_thread()) {
+        if (server_.holdsNetworkLock()) {
             sendHere(requestId, std::move(message));
             return;
         }
+        // Not under the network lock: queued to the service thread rather than taking the
+        // lock here, so that a caller holding locks of its own cannot deadlock with a
+        // handler that takes them.
         asio::post(server_.io, [self = self(), requestId, m = std::move(message)]() mutable {
+            NetworkLock lock(self->server_);
             self->sendHere(requestId, std::move(m));
         });
     }
 
     void sendServiceFault(UInt32 requestId, UInt32 requestHandle, StatusCode status) override {
         if (isClosed()) return;
-        if (server_.io.get_executor().running_in_this_thread()) {
-            if (lingering_ || finished_) return;
+        if (server_.holdsNetworkLock()) {
+            if (closing_ || finished_) return;
             channel_.sendServiceFault(requestId, requestHandle, status);
-            afterActivity();
+            noteClosed();
             return;
         }
         asio::post(server_.io, [self = self(), requestId, requestHandle, status] {
+            NetworkLock lock(self->server_);
             self->sendServiceFault(requestId, requestHandle, status);
         });
     }
 
     void close() override {
         if (isClosed()) return;
-        if (server_.io.get_executor().running_in_this_thread()) {
+        if (server_.holdsNetworkLock()) {
             channel_.close();
-            afterActivity();
+            noteClosed();
             return;
         }
-        asio::post(server_.io, [self = self()] { self->close(); });
+        asio::post(server_.io, [self = self()] {
+            NetworkLock lock(self->server_);
+            self->close();
+        });
     }
 
-    // ---- network thread ---------------------------------------------------------------
-    void start() {
-        asio::error_code ignored;
-        socket_->non_blocking(true, ignored);  // for the direct write in flush()
-        if (rejected_) {
-            channel_.fail(status::BadTcpServerTooBusy, "too many connections");
-            afterActivity();
-        }
-        startRead();
-    }
-
+    // ---- under the network lock ---------------------------------------------------------
     void housekeeping(TimePoint now) {
-        if (finished_) return;
-        if (lingering_) {
-            if (now >= lingerUntil_) finish(true);
-            return;
-        }
+        if (closing_ || finished_) return;
         channel_.tick(now);
-        afterActivity();
+        noteClosed();
     }
 
-    // Server stop: close at once.
-    void shutdownNow() {
-        if (!channel_.isClosed()) channel_.close();
-        finish(true);
+    // Server stop: the thread leaves at once (no linger).
+    void requestStop() {
+        stopRequested_.store(true, std::memory_order_release);
+        if (fd_ >= 0) ::shutdown(fd_, SHUT_RDWR);  // wakes recv() / send()
+    }
+
+    // ---- the connection's thread ----------------------------------------------------------
+    void run() {
+        setReceiveTimeout(fd_, kConnectionPoll);
+        std::span<Byte> space;
+        {
+            NetworkLock lock(server_);
+            if (rejected_) channel_.fail(status::BadTcpServerTooBusy, "too many connections");
+            noteClosed();
+            space = channel_.readSpace();
+        }
+        while (!stopRequested()) {
+            WriteResult w = writeQueued();
+            if (w == WriteResult::Error) break;  // the peer is gone
+            if (closing_.load(std::memory_order_acquire)) {
+                linger();
+                break;
+            }
+            if (w == WriteResult::Stalled) {
+                // The socket takes no more for now: wait for room, and for requests while
+                // the backlog is small (backpressure on a client that does not read).
+                short events = POLLOUT;
+                if (queuedBytes() <= kMaxQueuedOutput) events |= POLLIN;
+                pollfd p{fd_, events, 0};
+                if (::poll(&p, 1, static_cast<int>(kConnectionPoll.count())) <= 0 ||
+                    (p.revents & (POLLIN | POLLERR | POLLHUP)) == 0)
+                    continue;
+            }
+            ssize_t n = ::recv(fd_, space.data(), space.size(), 0);
+            if (n > 0) {
+                NetworkLock lock(server_);
+                channel_.received(static_cast<std::size_t>(n), coarseNow());  // never throws
+                noteClosed();
+                space = channel_.readSpace();
+            } else if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) {
+                // the poll period passed: look at the flags and the queue again
+            } else {
+                break;  // closed or reset, possibly in the middle of a message
+            }
+        }
+        finish();
+    }
+
+    enum class WriteResult { Drained, Stalled, Error };
+
+    // Writes queued output without blocking (called by any thread; not under the network
+    // lock). Only one thread writes at a time: a caller that finds another one writing
+    // leaves its bytes to it. Stalled: the socket took less than everything.
+    WriteResult writeQueued() {
+        for (;;) {
+            std::unique_lock w(writeMutex_, std::try_to_lock);
+            if (!w.owns_lock()) return WriteResult::Drained;  // the current writer takes them
+            if (broken_) return WriteResult::Error;
+            WriteResult r = writeSome();
+            w.unlock();
+            if (r != WriteResult::Drained) return r;
+            // Bytes queued while the write mutex was held may have been left by a caller
+            // that saw it taken.
+            std::lock_guard q(outMutex_);
+            if (outHead_ == out_.size()) return r;
+        }
     }
 
   private:
@@ -184,10 +296,34 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         return std::static_pointer_cast<TcpServerConnection>(shared_from_this());
     }
 
-    // ---- ServerChannel::Hooks ---------------------------------------------------------
+    bool stopRequested() const { return stopRequested_.load(std::memory_order_acquire); }
+
+    // After the channel may have closed (under the network lock).
+    void noteClosed() {
+        if (channel_.isClosed() && !closing_.load(std::memory_order_relaxed)) {
+            closedFlag_.store(true, std::memory_order_release);
+            closing_.store(true, std::memory_order_release);
+            markDirty();  // FIN as soon as the output is written (afterNetworkLock())
+        }
+    }
+
+    // Under the network lock: afterNetworkLock() runs when it is released.
+    void markDirty() {
+        if (!dirty_) {
+            dirty_ = true;
+            server_.dirty.push_back(self());
+        }
+    }
+
+    // ---- ServerChannel::Hooks (under the network lock) ----------------------------------
     void write(Buffer&& bytes) override {
-        queuedBytes_ += bytes.size();
-        pending_.push_back(std::move(bytes));
+        if (finished_) return;
+        {
+            std::lock_guard q(outMutex_);
+            queued_ += bytes.size();
+            out_.push_back(std::move(bytes));
+        }
+        markDirty();
     }
 
     void request(const IncomingRequest& r) override {
@@ -201,143 +337,157 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         return id;
     }
 
-    // ---- I/O ------------------------------------------------------------------------
     void sendHere(UInt32 requestId, Buffer&& message) {
-        if (lingering_ || finished_) return;
+        if (closing_ || finished_) return;
         channel_.send(requestId, std::move(message));
-        afterActivity();
+        noteClosed();
     }
 
-    // After the channel produced output or closed outside of a read batch.
-    void afterActivity() {
-        if (inBatch_ || finished_) return;
-        flush();
-        if (channel_.isClosed()) beginClose();
-    }
-
-    void startRead() {
-        if (finished_ || readInFlight_) return;
-        if (queuedBytes_ > kMaxQueuedOutput && !lingering_) return;  // resumed by onWritten
-        auto space = channel_.readSpace();
-        readInFlight_ = true;
-        socket_->async_read_some(
-            asio::buffer(space.data(), space.size()),
-            [self = self()](const asio::error_code& ec, std::size_t n) { self->onRead(ec, n); });
-    }
-
-    void onRead(const asio::error_code& ec, std::size_t n) {
-        readInFlight_ = false;
-        if (finished_) return;
-        if (ec) {
-            // The peer closed or reset (possibly in the middle of a message).
-            if (!channel_.isClosed()) channel_.close();
-            finish(true);
+  public:
+    // Called by NetworkLock::unlock() for connections in `dirty`.
+    void clearDirty() { dirty_ = false; }
+    // After the network lock was released (any thread): writes what was queued; once a
+    // closed channel's output is all written, sends FIN at once (the connection's thread,
+    // maybe blocked in recv(), lingers when it next wakes).
+    void afterNetworkLock() {
+        if (writeQueued() != WriteResult::Drained || !closing_.load(std::memory_order_acquire))
             return;
-        }
-        inBatch_ = true;
-        channel_.received(n, coarseNow());  // never throws: errors become ERR + Closed
-        inBatch_ = false;
-        flush();
-        if (channel_.isClosed()) beginClose();
-        startRead();
+        std::lock_guard w(writeMutex_);
+        std::lock_guard q(outMutex_);
+        if (fd_ >= 0 && outHead_ == out_.size() && !broken_) ::shutdown(fd_, SHUT_WR);
     }
 
-    void flush() {
-        if (writeInFlight_ || pending_.empty() || finished_) return;
-        writing_.swap(pending_);
-        iov_.clear();
-        for (const auto& b : writing_) iov_.emplace_back(b.data(), b.size());
-        // Fast path: the kernel almost always takes a response at once. Writing it here
-        // (the socket is in non-blocking mode) saves the asynchronous write's completion
-        // handler and the extra reactor round (epoll_wait) it costs on every request. What
-        // is left (a full send buffer, an error) goes the asynchronous way, which also
-        // reports errors as before.
-        std::size_t first = 0;
-        asio::error_code ec;
-        std::size_t n = socket_->write_some(BufferView{iov_.data(), iov_.data() + iov_.size()}, ec);
-        if (!ec) {
-            while (first < iov_.size() && n >= iov_[first].size()) n -= iov_[first++].size();
-            if (first == iov_.size()) {  // all written: what onWritten() would do
-                for (const auto& b : writing_) queuedBytes_ -= b.size();
-                writing_.clear();
-                return;
+  private:
+    // Under writeMutex_.
+    WriteResult writeSome() {
+        iovec iov[kMaxIov];
+        for (;;) {
+            std::size_t count = 0;
+            {
+                std::lock_guard q(outMutex_);
+                if (outHead_ == out_.size()) return WriteResult::Drained;
+                for (std::size_t k = outHead_; k < out_.size() && count < kMaxIov; ++k) {
+                    const Buffer& b = out_[k];
+                    std::size_t skip = count == 0 ? frontWritten_ : 0;
+                    iov[count].iov_base = const_cast<Byte*>(b.data()) + skip;
+                    iov[count].iov_len = b.size() - skip;
+                    ++count;
+                }
             }
-            iov_[first] += n;
+            msghdr msg{};
+            msg.msg_iov = iov;
+            msg.msg_iovlen = count;
+            ssize_t n = ::sendmsg(fd_, &msg, MSG_NOSIGNAL | MSG_DONTWAIT);
+            if (n < 0) {
+                if (errno == EINTR) continue;
+                if (errno == EAGAIN || errno == EWOULDBLOCK) return WriteResult::Stalled;
+                broken_ = true;
+                return WriteResult::Error;
+            }
+            std::lock_guard q(outMutex_);
+            auto left = static_cast<std::size_t>(n);
+            while (left > 0) {
+                std::size_t rest = out_[outHead_].size() - frontWritten_;
+                if (left < rest) {
+                    frontWritten_ += left;
+                    break;
+                }
+                left -= rest;
+                queued_ -= out_[outHead_].size();
+                out_[outHead_++] = Buffer();  // its memory goes now
+                frontWritten_ = 0;
+            }
+            if (outHead_ == out_.size()) {
+                out_.clear();
+                outHead_ = 0;
+            }
         }
-        writeInFlight_ = true;
-        asio::async_write(
-            *socket_, BufferView{iov_.data() + first, iov_.data() + iov_.size()},
-            [self = self()](const asio::error_code& ec, std::size_t) { self->onWritten(ec); });
     }
 
-    void onWritten(const asio::error_code& ec) {
-        writeInFlight_ = false;
-        for (const auto& b : writing_) queuedBytes_ -= b.size();
-        writing_.clear();
-        if (finished_) return;
-        if (ec) {
-            if (!channel_.isClosed()) channel_.close();
-            finish(true);
-            return;
+    std::size_t queuedBytes() {
+        std::lock_guard q(outMutex_);
+        return queued_;
+    }
+
+    // The channel is closed: write what is pending, send FIN, read and discard until the
+    // peer closes (at most kLinger).
+    void linger() {
+        const TimePoint until = Clock::now() + kLinger;
+        auto msLeft = [&] {
+            auto d = std::chrono::duration_cast<std::chrono::milliseconds>(until - Clock::now());
+            return static_cast<int>(std::clamp<std::int64_t>(d.count(), 0, kConnectionPoll.count()));
+        };
+        for (;;) {
+            WriteResult w = writeQueued();
+            if (w == WriteResult::Error || stopRequested() || Clock::now() >= until) return;
+            if (w == WriteResult::Drained && queuedBytes() == 0) break;
+            pollfd p{fd_, POLLOUT, 0};
+            ::poll(&p, 1, msLeft());
         }
-        flush();
-        if (lingering_ && !writeInFlight_) sendFin();
-        startRead();  // no-op unless paused by backpressure
+        ::shutdown(fd_, SHUT_WR);
+        Byte sink[4096];
+        while (!stopRequested() && Clock::now() < until) {
+            ssize_t n = ::recv(fd_, sink, sizeof sink, 0);
+            if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
+                return;
+        }
     }
 
-    // The channel is closed: write what is pending, send FIN, read until the peer closes.
-    void beginClose() {
-        if (lingering_ || finished_) return;
-        lingering_ = true;
-        closedFlag_.store(true, std::memory_order_release);
-        lingerUntil_ = Clock::now() + kLinger;
-        flush();
-        if (!writeInFlight_) sendFin();
-    }
-
-    void sendFin() {
-        if (finSent_ || !socket_) return;
-        finSent_ = true;
-        asio::error_code ignored;
-        socket_->shutdown(tcp::socket::shutdown_send, ignored);
-    }
-
-    void finish(bool notify) {
-        if (finished_) return;
+    void finish() {
+        std::lock_guard w(writeMutex_);  // no other thread writes to fd_ from here on
+        NetworkLock lock(server_);
+        if (!channel_.isClosed()) channel_.close();
         finished_ = true;
         closedFlag_.store(true, std::memory_order_release);
-        asio::error_code ignored;
-        socket_->close(ignored);
-        // Destroying the socket here (pending operations complete with operation_aborted)
-        // keeps a ServerConnection the upper layer still holds from touching the
-        // io_context after the server is gone.
-        socket_.reset();
+        closing_.store(true, std::memory_order_release);
         channel_.leaveBudget();  // the server's budget may be gone before this connection
-        for (const auto& b : pending_) queuedBytes_ -= b.size();
-        pending_.clear();
-        server_.removeConnection(self(), notify && !rejected_);
+        {
+            std::lock_guard q(outMutex_);
+            out_.clear();
+            outHead_ = 0;
+            queued_ = 0;
+            frontWritten_ = 0;
+        }
+        ::close(fd_);
+        fd_ = -1;
+        server_.removeConnection(self(), !rejected_);
     }
 
     TcpServer::Impl& server_;
-    std::optional<tcp::socket> socket_;
+    int fd_;  // closed under the write mutex and the network lock
     std::string peer_;
-    ServerChannel channel_;
+    ServerChannel channel_;  // under the network lock (readSpace: the connection's thread)
     bool rejected_;
     std::atomic<UInt32> channelId_{0};
-    std::atomic<bool> closedFlag_{false};
+    std::atomic<bool> closedFlag_{false};      // isClosed()
+    std::atomic<bool> closing_{false};         // the channel closed: linger, then finish
+    std::atomic<bool> stopRequested_{false};   // server stop: finish at once
+    bool finished_ = false;                    // under the network lock
+    bool dirty_ = false;                       // in server_.dirty (network lock)
 
-    std::vector<Buffer> pending_;  // produced, not yet handed to the socket
-    std::vector<Buffer> writing_;  // being written
-    std::vector<asio::const_buffer> iov_;
-    bool writeInFlight_ = false;
-    bool readInFlight_ = false;
-    bool inBatch_ = false;
-    bool lingering_ = false;
-    bool finSent_ = false;
-    bool finished_ = false;
-    std::size_t queuedBytes_ = 0;  // in pending_ + writing_
-    TimePoint lingerUntil_{};
+    std::mutex writeMutex_;  // held by the one thread writing to the socket
+    bool broken_ = false;    // under writeMutex_
+    std::mutex outMutex_;    // guards the three below
+    // Queued output: out_[outHead_ ...] (a vector rather than a deque: no allocation per
+    // response once it has grown; emptied when everything is written).
+    std::vector<Buffer> out_;
+    std::size_t outHead_ = 0;
+    std::size_t frontWritten_ = 0;  // bytes of out_[outHead_] already written
+    std::size_t queued_ = 0;        // bytes in out_
 };
+
+void NetworkLock::unlock() {
+    if (!lock_.owns_lock()) return;
+    // Moved to a per-thread vector; both keep their capacity: no allocation per request.
+    thread_local std::vector<std::shared_ptr<TcpServerConnection>> t_dirty;
+    std::move(s_.dirty.begin(), s_.dirty.end(), std::back_inserter(t_dirty));
+    s_.dirty.clear();
+    for (auto& c : t_dirty) c->clearDirty();
+    t_networkLockHolder = nullptr;
+    lock_.unlock();
+    for (auto& c : t_dirty) c->afterNetworkLock();
+    t_dirty.clear();
+}
 
 // =======================================================================================
 void TcpServer::Impl::accept() {
@@ -362,24 +512,49 @@ void TcpServer::Impl::onAccepted(const asio::error_code& ec, tcp::socket socket)
     std::string peer;
     auto remote = socket.remote_endpoint(ignored);
     if (!ignored) peer = endpointString(remote);
-
-    bool reject = activeConnections >= config.maxConnections;
-    if (reject && rejectedConnections >= std::max<std::size_t>(config.maxConnections, 16)) {
-        socket.close(ignored);  // flooded: not even an ERR
-    } else {
-        auto c = std::make_shared<TcpServerConnection>(*this, std::move(socket), std::move(peer),
-                                                       reject);
-        connections.insert(c);
-        if (reject)
-            ++rejectedConnections;
-        else
-            ++activeConnections;
-        connectionCount.store(activeConnections, std::memory_order_relaxed);
-        c->start();
-    }
     accept();
+
+    NetworkLock lock(*this);
+    bool reject = activeConnections >= config.maxConnections;
+    if (stopping ||
+        (reject && rejectedConnections >= std::max<std::size_t>(config.maxConnections, 16))) {
+        socket.close(ignored);  // flooded: not even an ERR
+        return;
+    }
+    int fd = socket.release(ignored);
+    if (fd < 0) return;
+    ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);  // the thread blocks in recv()
+    auto c = std::make_shared<TcpServerConnection>(*this, fd, std::move(peer), reject);
+    threadStarted();
+    try {
+        std::thread([c, this]() mutable {
+            c->run();
+            c.reset();  // before threadFinished(): stop() may destroy the server then
+            threadFinished();
+        }).detach();
+    } catch (const std::system_error&) {
+        threadFinished();  // no thread (resource limit): the connection is dropped
+        return;
+    }
+    connections.insert(c);
+    if (reject)
+        ++rejectedConnections;
+    else
+        ++activeConnections;
+    connectionCount.store(activeConnections, std::memory_order_relaxed);
 }
 
+void TcpServer::Impl::threadStarted() {
+    std::lock_guard l(threadsMutex);
+    ++liveThreads;
+}
+
+void TcpServer::Impl::threadFinished() {
+    std::lock_guard l(threadsMutex);
+    if (--liveThreads == 0) threadsDone.notify_all();
+}
+
+// Under the network lock.
 void TcpServer::Impl::removeConnection(const std::shared_ptr<TcpServerConnection>& c, bool notify) {
     if (connections.erase(c) == 0) return;
     if (c->rejected())
@@ -391,7 +566,7 @@ void TcpServer::Impl::removeConnection(const std::shared_ptr<TcpServerConnection
         try {
             handler.onConnectionClosed(c);
         } catch (...) {
-            // The upper layer's problem; the network thread goes on.
+            // The upper layer's problem; the connection is gone anyway.
         }
     }
 }
@@ -406,6 +581,7 @@ void TcpServer::Impl::scheduleHousekeeping() {
 }
 
 void TcpServer::Impl::housekeeping() {
+    NetworkLock lock(*this);
     auto now = Clock::now();
     sweepList.assign(connections.begin(), connections.end());
     for (auto& c : sweepList) c->housekeeping(now);
@@ -416,30 +592,15 @@ void TcpServer::Impl::scheduleTick(std::uint64_t generation) {
     if (tickPeriod.count() <= 0 || !tickFn) return;
     tickTimer.expires_after(tickPeriod);
     tickTimer.async_wait([this, generation](const asio::error_code& ec) {
-        if (ec || generation != tickGeneration) return;
+        if (ec) return;
+        NetworkLock lock(*this);
+        if (generation != tickGeneration) return;
         try {
             tickFn();
         } catch (...) {
         }
         if (generation == tickGeneration) scheduleTick(generation);
     });
-}
-
-void TcpServer::Impl::shutdownAll() {
-    asio::error_code ignored;
-    acceptor.close(ignored);
-    housekeepingTimer.cancel();
-    acceptRetryTimer.cancel();
-    tickTimer.cancel();
-    ++tickGeneration;
-    sweepList.assign(connections.begin(), connections.end());
-    for (auto& c : sweepList) c->shutdownNow();
-    sweepList.clear();
-    connections.clear();
-    work.reset();
-    // Handlers still queued (cancelled operations, sends posted by other threads) are
-    // destroyed with the io_context; nothing of them needs to run.
-    io.stop();
 }
 
 // =======================================================================================
@@ -472,21 +633,58 @@ void TcpServer::start() {
                              "cannot listen on " + endpointString(ep) + ": " + ec.message());
     }
     i.boundPort = i.acceptor.local_endpoint().port();
+    {
+        std::lock_guard l(i.networkMutex);
+        i.stopping = false;
+    }
     i.io.restart();
     i.work.emplace(asio::make_work_guard(i.io));
     i.accept();
     i.scheduleHousekeeping();
-    i.scheduleTick(i.tickGeneration);
+    {
+        std::lock_guard l(i.networkMutex);
+        i.scheduleTick(i.tickGeneration);
+    }
     i.running.store(true);
-    i.thread = std::thread([&i] { i.io.run(); });
+    i.serviceThread = std::thread([&i] { i.io.run(); });
 }
 
 void TcpServer::stop() {
     auto& i = *impl_;
     if (!i.running.load()) return;
     if (isNetworkThread()) throw std::logic_error("TcpServer::stop() called on the network thread");
-    asio::post(i.io, [&i] { i.shutdownAll(); });
-    if (i.thread.joinable()) i.thread.join();
+    // 1. No new connections, no timers.
+    std::promise<void> quiet;
+    asio::post(i.io, [&i, &quiet] {
+        asio::error_code ignored;
+        i.acceptor.close(ignored);
+        i.housekeepingTimer.cancel();
+        i.acceptRetryTimer.cancel();
+        i.tickTimer.cancel();
+        quiet.set_value();
+    });
+    quiet.get_future().wait();
+    // 2. Every connection closes at once (onConnectionClosed for each, under the lock).
+    {
+        NetworkLock lock(i);
+        i.stopping = true;
+        ++i.tickGeneration;
+        for (auto& c : i.connections) c->requestStop();
+    }
+    {
+        std::unique_lock l(i.threadsMutex);
+        i.threadsDone.wait(l, [&i] { return i.liveThreads == 0; });
+    }
+    // 3. The service thread. Handlers still queued (sends posted by other threads) are
+    // destroyed with the io_context; nothing of them needs to run.
+    i.work.reset();
+    i.io.stop();
+    if (i.serviceThread.joinable()) i.serviceThread.join();
+    {
+        std::lock_guard l(i.networkMutex);
+        i.connections.clear();
+        i.dirty.clear();
+    }
     i.running.store(false);
     i.connectionCount.store(0);
 }
@@ -499,11 +697,19 @@ std::size_t TcpServer::connectionCount() const {
     return impl_->connectionCount.load(std::memory_order_relaxed);
 }
 
-void TcpServer::post(std::function<void()> fn) { asio::post(impl_->io, std::move(fn)); }
-
-bool TcpServer::isNetworkThread() const {
-    return impl_->io.get_executor().running_in_this_thread();
+void TcpServer::post(std::function<void()> fn) {
+    auto* i = impl_.get();
+    asio::post(i->io, [i, fn = std::move(fn)] {
+        NetworkLock lock(*i);
+        try {
+            fn();
+        } catch (...) {
+            // The caller's problem; the service thread goes on.
+        }
+    });
 }
+
+bool TcpServer::isNetworkThread() const { return impl_->holdsNetworkLock(); }
 
 void TcpServer::setTick(std::chrono::milliseconds period, std::function<void()> fn) {
     auto* i = impl_.get();
@@ -514,10 +720,15 @@ void TcpServer::setTick(std::chrono::milliseconds period, std::function<void()> 
         i->tickFn = std::move(fn);
         if (i->running.load()) i->scheduleTick(i->tickGeneration);
     };
-    if (!i->running.load())
+    if (!i->running.load()) {
+        std::lock_guard l(i->networkMutex);
         apply();
-    else
-        asio::post(i->io, std::move(apply));
+    } else {
+        asio::post(i->io, [i, apply = std::move(apply)]() mutable {
+            NetworkLock lock(*i);
+            apply();
+        });
+    }
 }
 
 }  // namespace pnp::ua::transport

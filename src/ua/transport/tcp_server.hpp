@@ -2,9 +2,15 @@
 // channel (OpenSecureChannel issue / renew, CloseSecureChannel) by itself and hands every
 // MSG request to a ServiceHandler.
 //
-// Threading: TcpServer owns ONE network thread (asio). Every callback (ServiceHandler,
-// post(), setTick()) runs on it. ServerConnection::send() / close() may be called from any
-// thread; on the network thread they act immediately, elsewhere they are posted to it.
+// Threading: every accepted connection has a thread of its own that blocks in recv() and
+// writes its responses itself: no event loop between the socket and the protocol, so a
+// request costs the system calls of a plain blocking echo server. A service thread (asio)
+// accepts and runs the timers and post()ed functions. Protocol and upper layer are
+// serialised by one lock, the network lock: every callback (ServiceHandler, post(),
+// setTick()) runs while its thread holds it, and "the network thread" below means "the
+// thread holding the network lock" (isNetworkThread()). ServerConnection::send() / close()
+// may be called from any thread; under the network lock they act immediately, elsewhere
+// they are posted to the service thread.
 //
 // Usage:
 //   class Handler : public ServiceHandler {
@@ -27,9 +33,9 @@
 // message and close that connection only. The connection then lingers briefly (reads and
 // discards until the peer closes, at most 2 s) so that the ERR is not lost in a TCP reset.
 //
-// Memory per connection: the receive buffer (receiveBufferSize + 16 KiB, allocated once),
-// one message being reassembled (at most maxMessageSize) and the responses waiting for the
-// socket. While more than 4 MiB of responses wait (a client that sends but does not read),
+// Memory per connection: its thread, the receive buffer (receiveBufferSize + 16 KiB,
+// allocated once), one message being reassembled (at most maxMessageSize) and the responses
+// waiting for the socket. While more than 4 MiB of responses wait (a client that sends but does not read),
 // the connection stops reading requests until the backlog drains.
 #pragma once
 
@@ -99,23 +105,24 @@ class TcpServer {
     TcpServer(const TcpServer&) = delete;
     TcpServer& operator=(const TcpServer&) = delete;
 
-    // Binds config.host:config.port, listens and starts the network thread. Throws
+    // Binds config.host:config.port, listens and starts the service thread. Throws
     // TransportError(BadCommunicationError) when the address cannot be bound.
     void start();
     // Closes the listener and every connection (onConnectionClosed for each, on the network
-    // thread) and joins the network thread. Idempotent. Must not be called from the
-    // network thread.
+    // thread) and joins the connection threads and the service thread. Idempotent. Must not
+    // be called under the network lock (from a callback).
     void stop();
     bool running() const;
 
     // The bound port (the ephemeral one when config.port was 0). Valid after start().
     UInt16 port() const;
 
-    // Runs fn on the network thread (also when called from it: queued, not run inline).
+    // Runs fn on the service thread under the network lock (also when called under it:
+    // queued, not run inline). Exceptions escaping fn are dropped.
     void post(std::function<void()> fn);
-    // True on the network thread.
+    // True while this thread holds the network lock (inside every callback).
     bool isNetworkThread() const;
-    // Runs fn on the network thread every `period` (replaces an earlier tick). Callable
+    // Runs fn under the network lock every `period` (replaces an earlier tick). Callable
     // before start() or from any thread afterwards. A period of 0 removes the tick.
     void setTick(std::chrono::milliseconds period, std::function<void()> fn);
 
@@ -125,6 +132,7 @@ class TcpServer {
 
   private:
     friend class TcpServerConnection;
+    friend class NetworkLock;
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };
