@@ -203,6 +203,7 @@ class Client::Impl {
             return;
         }
         notePossibleSessionLoss(m);
+        m.body.own();  // the callback runs later, after more reads
         done.add([cb = std::move(it->second.callback), r = std::move(m)]() mutable {
             cb(Result<IncomingResponse>(std::move(r)));
         });
@@ -758,14 +759,14 @@ ClientStats Client::stats() const {
 
 // ---- engine ------------------------------------------------------------------------------
 
-IncomingResponse Client::roundTrip(EncodeRef encode, bool idempotent, Deadline deadline,
-                                   std::string_view service) {
+void Client::roundTrip(EncodeRef encode, DecodeRef decode, bool idempotent, Deadline deadline,
+                       std::string_view service) {
     Impl& s = *impl_;
-    Completions done;
+    Completions done;  // run after the lock is released
     std::lock_guard lock(s.mutex);
     s.resolvedAt = Clock::now();
     Clock::time_point dl = deadline.resolve(s.resolvedAt, s.config.requestTimeout);
-    return s.roundTrip(encode, idempotent, dl, service, done);
+    decode(s.roundTrip(encode, idempotent, dl, service, done), s.config.decodeLimits);
 }
 
 void Client::sendAsync(EncodeRef encode, Deadline deadline, std::string_view service,
@@ -794,7 +795,9 @@ IncomingResponse Client::discoveryRoundTrip(std::string_view url, EncodeRef enco
             if (!s.wantConnected)
                 throw Error(status::BadNotConnected,
                             std::string(service) + ": not connected and no URL given");
-            return s.roundTrip(encode, true, dl, service, done);
+            IncomingResponse r = s.roundTrip(encode, true, dl, service, done);
+            r.body.own();  // outlives the lock
+            return r;
         }
     }
     // A temporary connection, without a session and without the client's lock.
@@ -812,6 +815,7 @@ IncomingResponse Client::discoveryRoundTrip(std::string_view url, EncodeRef enco
             auto m = c->receive(dl);
             if (!m) throw Error(status::BadTimeout, std::string(service) + " timed out");
             if (m->requestId == id) {
+                m->body.own();  // outlives the connection
                 c->close();
                 return std::move(*m);
             }

@@ -271,10 +271,25 @@ class Client {
                     detail::encodeRequest(b, *static_cast<const Req*>(p), h);
                 }};
     }
+    // Decodes a response while the client's lock is still held: its body may be a view of
+    // the connection's receive buffer, which the next receive (any thread) overwrites.
+    struct DecodeRef {
+        void* object;
+        void (*function)(void*, const transport::IncomingResponse&, const DecodeLimits&);
+        void operator()(const transport::IncomingResponse& r, const DecodeLimits& l) const {
+            function(object, r, l);
+        }
+    };
+    template <class Req, class Resp>
+    static DecodeRef decoderInto(Resp& out) {
+        return {&out, [](void* p, const transport::IncomingResponse& r, const DecodeLimits& l) {
+                    *static_cast<Resp*>(p) = decodeIncoming<Resp>(r, detail::serviceName<Req>(), l);
+                }};
+    }
     using RawCallback = std::function<void(Result<transport::IncomingResponse>)>;
 
-    transport::IncomingResponse roundTrip(EncodeRef encode, bool idempotent, Deadline deadline,
-                                          std::string_view service);
+    void roundTrip(EncodeRef encode, DecodeRef decode, bool idempotent, Deadline deadline,
+                   std::string_view service);
     void sendAsync(EncodeRef encode, Deadline deadline, std::string_view service,
                    RawCallback callback);
     transport::IncomingResponse discoveryRoundTrip(std::string_view url, EncodeRef encode,
@@ -300,9 +315,10 @@ Resp Client::decodeIncoming(const transport::IncomingResponse& r, std::string_vi
 template <class Req, class Resp>
 Resp Client::request(Req req, Deadline deadline) {
     constexpr std::string_view service = detail::serviceName<Req>();
-    transport::IncomingResponse r =
-        roundTrip(encoderFor(req), ServiceTraits<Req>::idempotent, deadline, service);
-    return decodeIncoming<Resp>(r, service, decodeLimits());
+    Resp out{};
+    roundTrip(encoderFor(req), decoderInto<Req>(out), ServiceTraits<Req>::idempotent, deadline,
+              service);
+    return out;
 }
 
 template <class Req, class Resp, class F>

@@ -64,19 +64,21 @@ MethodHandler makeMethodHandler(SyncMethodHandler handler) {
 namespace {
 
 // Whether `method` is a component of `object`, of its type or of a supertype of that type.
+// Walks the method's inverse HasComponent references (usually one) rather than the
+// object's references (an object may have hundreds of components).
 bool methodBelongsTo(const AddressSpace::Impl& s, NodeIndex object, NodeIndex method) {
-    auto hasComponent = [&](NodeIndex holder) {
-        for (const Ref& r : s.nodes[holder].refs)
-            if (r.target == method && r.isForward() && !r.isExternal() &&
+    auto isComponentOf = [&](NodeIndex holder) {
+        for (const Ref& r : s.nodes[method].refs)
+            if (r.target == holder && !r.isForward() && !r.isExternal() &&
                 s.refTypeMatches(r.type, s.rtHasComponent, true))
                 return true;
         return false;
     };
-    if (hasComponent(object)) return true;
+    if (isComponentOf(object)) return true;
     NodeIndex type = s.nodes[object].nodeClass == NodeClassBits::Object ? s.typeDefinitionOf(object)
                                                                         : s.supertypeOf(object);
     for (int depth = 0; type != kNoNode && depth < 64; ++depth) {
-        if (hasComponent(type)) return true;
+        if (isComponentOf(type)) return true;
         type = s.supertypeOf(type);
     }
     return false;
@@ -135,18 +137,20 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
                 } else if (m.inputArguments.size() > args.size()) {
                     st = status::BadTooManyArguments;
                 } else {
-                    std::vector<StatusCode> argResults(args.size());
-                    bool anyBad = false;
-                    for (std::size_t a = 0; a < args.size(); ++a) {
+                    // inputArgumentResults only when one is bad (no allocation otherwise).
+                    const NodeIndex baseDataType = s.find(ns0::BaseDataType);
+                    auto check = [&](std::size_t a) {
                         NodeIndex dt = s.find(args[a].dataType);
-                        bool allowEmpty = dt == s.find(ns0::BaseDataType);
-                        argResults[a] = s.checkValue(m.inputArguments[a], dt, args[a].valueRank,
-                                                     args[a].arrayDimensions, allowEmpty);
-                        anyBad = anyBad || argResults[a].isBad();
-                    }
-                    if (anyBad) {
+                        return s.checkValue(m.inputArguments[a], dt, args[a].valueRank,
+                                            args[a].arrayDimensions, dt == baseDataType);
+                    };
+                    std::size_t firstBad = 0;
+                    while (firstBad < args.size() && !check(firstBad).isBad()) ++firstBad;
+                    if (firstBad < args.size()) {
                         st = status::BadInvalidArgument;
-                        res.inputArgumentResults = std::move(argResults);
+                        res.inputArgumentResults.resize(args.size());
+                        for (std::size_t a = 0; a < args.size(); ++a)
+                            res.inputArgumentResults[a] = check(a);
                     } else {
                         auto h = s.handlerOf(method);
                         if (h == nullptr) {

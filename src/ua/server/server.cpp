@@ -204,13 +204,13 @@ std::vector<EndpointDescription> Server::endpointDescriptions(const std::string&
 // ---- dispatch -------------------------------------------------------------------------------
 namespace {
 template <class Resp>
-void sendResponse(transport::ServerConnection& conn, UInt32 requestId, const RequestHeader& req,
+void sendResponse(transport::ServerConnection& conn, UInt32 requestId, UInt32 requestHandle,
                   Resp& resp) {
-    resp.responseHeader.requestHandle = req.requestHandle;
+    resp.responseHeader.requestHandle = requestHandle;
     resp.responseHeader.timestamp = DateTime::nowCoarse();
     if (resp.responseHeader.serviceResult.isBad()) {
         // A failed service carries no results (Part 4 §7.30): answer with a ServiceFault.
-        conn.sendServiceFault(requestId, req.requestHandle, resp.responseHeader.serviceResult);
+        conn.sendServiceFault(requestId, requestHandle, resp.responseHeader.serviceResult);
         return;
     }
     Buffer b = transport::ServerConnection::newMessageBuffer();
@@ -265,7 +265,7 @@ void Server::serve(const std::shared_ptr<transport::ServerConnection>& conn,
                                status::BadInternalError);
         return;
     }
-    sendResponse(*conn, in.requestId, req.requestHeader, resp);
+    sendResponse(*conn, in.requestId, req.requestHeader.requestHandle, resp);
 }
 
 void Server::onRequest(const std::shared_ptr<transport::ServerConnection>& conn,
@@ -507,8 +507,8 @@ void Server::call(const std::shared_ptr<transport::ServerConnection>& conn,
             return;
         }
     }
-    auto respond = [conn, requestId = in.requestId, header = std::move(req.requestHeader)](
-                       CallResponse resp) { sendResponse(*conn, requestId, header, resp); };
+    auto respond = [conn, requestId = in.requestId, handle = req.requestHeader.requestHandle](
+                       CallResponse resp) { sendResponse(*conn, requestId, handle, resp); };
     addressSpace_->call(std::move(req), ctx.session->sessionId, std::move(respond));
 }
 

@@ -154,7 +154,10 @@ EndpointUrl parseEndpointUrl(const std::string& url) {
 
 // =======================================================================================
 ClientConnection::ClientConnection(const std::string& url, const ClientConfig& config)
-    : url_(url), config_(config), channel_(config_, url, *this) {}
+    : url_(url), config_(config), channel_(config_, url, *this) {
+    // Bodies stay in the receive buffer until the next read (see receive()).
+    channel_.setViewBodies(true);
+}
 
 ClientConnection::~ClientConnection() { close(); }
 
@@ -265,6 +268,8 @@ long ClientConnection::receiveBlocking(std::span<Byte> space, std::chrono::nanos
 
 bool ClientConnection::readOnce(Deadline deadline) {
     if (fd_ < 0) throw TransportError(status::BadConnectionClosed, "connection closed");
+    // Responses not yet handed out must not point into the buffer about to be read into.
+    for (auto& r : ready_) r.body.own();
     auto space = channel_.readSpace();
     for (;;) {
         // Coarse: the deadline is kept to within a scheduler tick (see receiveBlocking).

@@ -73,6 +73,8 @@ class ClientConnection final : private ClientChannel::Hooks {
 
     // The next response (any request id, in arrival order), nullopt when the deadline
     // passed first. Deadline in the past: only what is already there (non-blocking).
+    // The body may be a view of the receive buffer (no copy): valid until the next call of
+    // receive(), send(), drainAvailable() or close(); body.own() keeps it longer.
     std::optional<IncomingResponse> receive(Deadline deadline);
 
     // Sends the renew request when due (see above). True when one was sent.

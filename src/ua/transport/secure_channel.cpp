@@ -485,13 +485,16 @@ void ClientChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
     r.requestId = ev.requestId;
     r.typeId = decodeTypeId(d);
     const std::size_t prefix = ev.size - d.remaining();
-    // An assembled body stays in the assembly buffer; a single-chunk one is copied out of
-    // the receive buffer. (Handing the receive buffer over instead and allocating a new one
-    // was measured slower: glibc trims and re-faults the freed 80 KiB every time.)
+    // An assembled body stays in the assembly buffer; a single-chunk one is viewed in the
+    // receive buffer or copied out of it. (Handing the receive buffer over instead and
+    // allocating a new one was measured slower: glibc trims and re-faults the freed 80 KiB
+    // every time.)
     if (ev.assembled) {
         r.body = MessageBody(std::move(assembler_.assemblyBuffer()), prefix, d.remaining());
+    } else if (viewBodies_) {
+        r.body = MessageBody::viewOf(d.position(), d.remaining());
     } else {
-        r.body = MessageBody(Buffer(d.position(), d.position() + d.remaining()));
+        r.body = MessageBody(d.position(), d.remaining());
     }
     hooks_.response(std::move(r));
 }

@@ -9,9 +9,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstring>
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 
 #include "ua/transport/chunks.hpp"
 
@@ -30,24 +32,66 @@ struct IncomingRequest {
 // (OPC 10000-6 §6.7.3) status is the abort chunk's Error, typeId is null and body empty;
 // otherwise status is Good.
 // The bytes of a received message body: a slice of a buffer it owns, so a large body can
-// stay where it was received (no copy) and a multi-chunk one where it was assembled.
+// stay where it was received (no copy) and a multi-chunk one where it was assembled; or a
+// view of the receive buffer (ClientChannel::setViewBodies), valid until that buffer is
+// read into again: own() copies it out.
 class MessageBody {
   public:
     MessageBody() = default;
     explicit MessageBody(Buffer bytes) : storage_(std::move(bytes)), size_(storage_.size()) {}
     MessageBody(Buffer storage, std::size_t offset, std::size_t size)
         : storage_(std::move(storage)), offset_(offset), size_(size) {}
-    const Byte* data() const { return storage_.data() + offset_; }
+    // A copy of n bytes at p.
+    MessageBody(const Byte* p, std::size_t n) : storage_(n), size_(n) {
+        if (n != 0) std::memcpy(storage_.data(), p, n);
+    }
+    // A view of n bytes at p (not copied).
+    static MessageBody viewOf(const Byte* p, std::size_t n) {
+        MessageBody b;
+        b.view_ = p;
+        b.size_ = n;
+        return b;
+    }
+    MessageBody(MessageBody&& o) noexcept
+        : storage_(std::move(o.storage_)),
+          view_(std::exchange(o.view_, nullptr)),
+          offset_(std::exchange(o.offset_, 0)),
+          size_(std::exchange(o.size_, 0)) {}
+    MessageBody& operator=(MessageBody&& o) noexcept {
+        if (this != &o) {
+            storage_ = std::move(o.storage_);
+            view_ = std::exchange(o.view_, nullptr);
+            offset_ = std::exchange(o.offset_, 0);
+            size_ = std::exchange(o.size_, 0);
+        }
+        return *this;
+    }
+    // A copy owns its bytes.
+    MessageBody(const MessageBody& o) : MessageBody(o.data(), o.size()) {}
+    MessageBody& operator=(const MessageBody& o) {
+        if (this != &o) *this = MessageBody(o);
+        return *this;
+    }
+
+    const Byte* data() const { return view_ != nullptr ? view_ : storage_.data() + offset_; }
     std::size_t size() const { return size_; }
     bool empty() const { return size_ == 0; }
     const Byte* begin() const { return data(); }
     const Byte* end() const { return data() + size_; }
+    // True while the bytes are a view of a buffer owned elsewhere.
+    bool isView() const { return view_ != nullptr; }
+    // Makes the body own its bytes (copies a view; no-op otherwise).
+    void own() {
+        if (view_ == nullptr) return;
+        *this = MessageBody(view_, size_);
+    }
     friend bool operator==(const MessageBody& a, const Buffer& b) {
         return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin());
     }
 
   private:
     Buffer storage_;
+    const Byte* view_ = nullptr;
     std::size_t offset_ = 0;
     std::size_t size_ = 0;
 };
@@ -217,6 +261,9 @@ class ClientChannel {
     // the status of a protocol violation by the server (a CLO is written first when the
     // channel was open).
     std::span<Byte> readSpace() { return reader_.readSpace(); }
+    // A single-chunk response's body as a view of the receive buffer instead of a copy:
+    // valid until the next readSpace() / received() / feed(). Off by default.
+    void setViewBodies(bool on) { viewBodies_ = on; }
     void received(std::size_t n, TimePoint now);
     void feed(const Byte* p, std::size_t n, TimePoint now);
 
@@ -264,6 +311,7 @@ class ClientChannel {
     UInt32 requestIdCounter_ = 0;
     UInt32 openRequestId_ = 0;   // outstanding Issue request
     UInt32 renewRequestId_ = 0;  // outstanding Renew request
+    bool viewBodies_ = false;
 };
 
 }  // namespace pnp::ua::transport

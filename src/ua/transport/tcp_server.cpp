@@ -210,9 +210,12 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             noteClosed();
             return;
         }
+        // Takes effect before anything this connection receives from now on (the thread
+        // checks the flag before handling input), and at once for an idle connection.
+        closeRequested_.store(true, std::memory_order_release);
         asio::post(server_.io, [self = self()] {
             NetworkLock lock(self->server_);
-            self->close();
+            self->applyCloseRequest();
         });
     }
 
@@ -259,6 +262,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             ssize_t n = ::recv(fd_, space.data(), space.size(), 0);
             if (n > 0) {
                 NetworkLock lock(server_);
+                applyCloseRequest();
                 channel_.received(static_cast<std::size_t>(n), coarseNow());  // never throws
                 noteClosed();
                 space = channel_.readSpace();
@@ -273,21 +277,60 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
 
     enum class WriteResult { Drained, Stalled, Error };
 
-    // Writes queued output without blocking (called by any thread; not under the network
-    // lock). Only one thread writes at a time: a caller that finds another one writing
-    // leaves its bytes to it. Stalled: the socket took less than everything.
+    // Writes queued output without blocking (any thread, not under the network lock).
+    // One thread writes at a time (writing_): a caller that finds another one writing
+    // leaves its bytes to it, which writes until the queue is empty. Stalled: the socket
+    // took less than everything.
     WriteResult writeQueued() {
+        std::unique_lock q(outMutex_);
+        if (writing_) return WriteResult::Drained;
+        if (broken_) return WriteResult::Error;
+        if (outHead_ == out_.size()) return WriteResult::Drained;
+        writing_ = true;
+        iovec iov[kMaxIov];
         for (;;) {
-            std::unique_lock w(writeMutex_, std::try_to_lock);
-            if (!w.owns_lock()) return WriteResult::Drained;  // the current writer takes them
-            if (broken_) return WriteResult::Error;
-            WriteResult r = writeSome();
-            w.unlock();
-            if (r != WriteResult::Drained) return r;
-            // Bytes queued while the write mutex was held may have been left by a caller
-            // that saw it taken.
-            std::lock_guard q(outMutex_);
-            if (outHead_ == out_.size()) return r;
+            std::size_t count = 0;
+            for (std::size_t k = outHead_; k < out_.size() && count < kMaxIov; ++k) {
+                const Buffer& b = out_[k];
+                std::size_t skip = count == 0 ? frontWritten_ : 0;
+                iov[count].iov_base = const_cast<Byte*>(b.data()) + skip;
+                iov[count].iov_len = b.size() - skip;
+                ++count;
+            }
+            q.unlock();  // others may append meanwhile; only the writer removes
+            msghdr msg{};
+            msg.msg_iov = iov;
+            msg.msg_iovlen = count;
+            ssize_t n = ::sendmsg(fd_, &msg, MSG_NOSIGNAL | MSG_DONTWAIT);
+            int err = n < 0 ? errno : 0;
+            q.lock();
+            if (n < 0) {
+                if (err == EINTR) continue;
+                writing_ = false;
+                writerDone_.notify_all();
+                if (err == EAGAIN || err == EWOULDBLOCK) return WriteResult::Stalled;
+                broken_ = true;
+                return WriteResult::Error;
+            }
+            auto left = static_cast<std::size_t>(n);
+            while (left > 0) {
+                std::size_t rest = out_[outHead_].size() - frontWritten_;
+                if (left < rest) {
+                    frontWritten_ += left;
+                    break;
+                }
+                left -= rest;
+                queued_ -= out_[outHead_].size();
+                out_[outHead_++] = Buffer();  // its memory goes now
+                frontWritten_ = 0;
+            }
+            if (outHead_ == out_.size()) {
+                out_.clear();
+                outHead_ = 0;
+                writing_ = false;
+                writerDone_.notify_all();
+                return WriteResult::Drained;
+            }
         }
     }
 
@@ -297,6 +340,14 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     }
 
     bool stopRequested() const { return stopRequested_.load(std::memory_order_acquire); }
+
+    // close() called without the network lock (under it).
+    void applyCloseRequest() {
+        if (closeRequested_.load(std::memory_order_acquire) && !channel_.isClosed()) {
+            channel_.close();
+            noteClosed();
+        }
+    }
 
     // After the channel may have closed (under the network lock).
     void noteClosed() {
@@ -352,58 +403,11 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     void afterNetworkLock() {
         if (writeQueued() != WriteResult::Drained || !closing_.load(std::memory_order_acquire))
             return;
-        std::lock_guard w(writeMutex_);
         std::lock_guard q(outMutex_);
-        if (fd_ >= 0 && outHead_ == out_.size() && !broken_) ::shutdown(fd_, SHUT_WR);
+        if (!writing_ && !broken_ && outHead_ == out_.size()) ::shutdown(fd_, SHUT_WR);
     }
 
   private:
-    // Under writeMutex_.
-    WriteResult writeSome() {
-        iovec iov[kMaxIov];
-        for (;;) {
-            std::size_t count = 0;
-            {
-                std::lock_guard q(outMutex_);
-                if (outHead_ == out_.size()) return WriteResult::Drained;
-                for (std::size_t k = outHead_; k < out_.size() && count < kMaxIov; ++k) {
-                    const Buffer& b = out_[k];
-                    std::size_t skip = count == 0 ? frontWritten_ : 0;
-                    iov[count].iov_base = const_cast<Byte*>(b.data()) + skip;
-                    iov[count].iov_len = b.size() - skip;
-                    ++count;
-                }
-            }
-            msghdr msg{};
-            msg.msg_iov = iov;
-            msg.msg_iovlen = count;
-            ssize_t n = ::sendmsg(fd_, &msg, MSG_NOSIGNAL | MSG_DONTWAIT);
-            if (n < 0) {
-                if (errno == EINTR) continue;
-                if (errno == EAGAIN || errno == EWOULDBLOCK) return WriteResult::Stalled;
-                broken_ = true;
-                return WriteResult::Error;
-            }
-            std::lock_guard q(outMutex_);
-            auto left = static_cast<std::size_t>(n);
-            while (left > 0) {
-                std::size_t rest = out_[outHead_].size() - frontWritten_;
-                if (left < rest) {
-                    frontWritten_ += left;
-                    break;
-                }
-                left -= rest;
-                queued_ -= out_[outHead_].size();
-                out_[outHead_++] = Buffer();  // its memory goes now
-                frontWritten_ = 0;
-            }
-            if (outHead_ == out_.size()) {
-                out_.clear();
-                outHead_ = 0;
-            }
-        }
-    }
-
     std::size_t queuedBytes() {
         std::lock_guard q(outMutex_);
         return queued_;
@@ -434,7 +438,12 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     }
 
     void finish() {
-        std::lock_guard w(writeMutex_);  // no other thread writes to fd_ from here on
+        {
+            // No thread writes to fd_ from here on.
+            std::unique_lock q(outMutex_);
+            broken_ = true;
+            writerDone_.wait(q, [this] { return !writing_; });
+        }
         NetworkLock lock(server_);
         if (!channel_.isClosed()) channel_.close();
         finished_ = true;
@@ -454,7 +463,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     }
 
     TcpServer::Impl& server_;
-    int fd_;  // closed under the write mutex and the network lock
+    int fd_;  // closed (finish()) when no thread writes, under the network lock
     std::string peer_;
     ServerChannel channel_;  // under the network lock (readSpace: the connection's thread)
     bool rejected_;
@@ -462,12 +471,14 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     std::atomic<bool> closedFlag_{false};      // isClosed()
     std::atomic<bool> closing_{false};         // the channel closed: linger, then finish
     std::atomic<bool> stopRequested_{false};   // server stop: finish at once
+    std::atomic<bool> closeRequested_{false};  // close() from a thread without the lock
     bool finished_ = false;                    // under the network lock
     bool dirty_ = false;                       // in server_.dirty (network lock)
 
-    std::mutex writeMutex_;  // held by the one thread writing to the socket
-    bool broken_ = false;    // under writeMutex_
-    std::mutex outMutex_;    // guards the three below
+    std::mutex outMutex_;  // guards the output state below
+    std::condition_variable writerDone_;
+    bool writing_ = false;  // a thread is writing (outside outMutex_, during sendmsg)
+    bool broken_ = false;   // socket error or finished: nobody writes any more
     // Queued output: out_[outHead_ ...] (a vector rather than a deque: no allocation per
     // response once it has grown; emptied when everything is written).
     std::vector<Buffer> out_;
