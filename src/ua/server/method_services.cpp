@@ -1,5 +1,6 @@
 // Method Service Set (OPC 10000-4 §5.11): Call with asynchronous completion.
 #include <future>
+#include <optional>
 
 #include "ua/server/address_space_impl.hpp"
 
@@ -106,8 +107,9 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
         std::shared_ptr<const MethodHandler> handler;
         MethodCallContext context;
     };
-    std::vector<Run> runs;
-    runs.reserve(n);
+    // Most Calls carry one method: its Run stays on the stack.
+    std::optional<Run> firstRun;
+    std::vector<Run> moreRuns;
     {
         std::shared_lock lock(impl_->mutex);
         const Impl& s = *impl_;
@@ -156,9 +158,12 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
                         if (h == nullptr) {
                             st = status::BadNotImplemented;
                         } else {
-                            runs.push_back(
-                                Run{k, std::move(h),
-                                    MethodCallContext{m.objectId, m.methodId, sessionId}});
+                            Run run{k, std::move(h),
+                                    MethodCallContext{m.objectId, m.methodId, sessionId}};
+                            if (!firstRun)
+                                firstRun.emplace(std::move(run));
+                            else
+                                moreRuns.push_back(std::move(run));
                             continue;
                         }
                     }
@@ -169,7 +174,7 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
         }
     }
     // Handlers run without the lock; each may complete now or later, on any thread.
-    for (auto& run : runs) {
+    auto start = [&](Run& run) {
         auto slot = std::make_shared<MethodCompletion::Slot>(state, run.index);
         MethodCompletion completion(slot);
         try {
@@ -178,7 +183,9 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
         } catch (...) {
             completion(status::BadInternalError);
         }
-    }
+    };
+    if (firstRun) start(*firstRun);
+    for (auto& run : moreRuns) start(run);
     std::unique_lock lock(state->mutex);
     state->finishOne(lock);
 }

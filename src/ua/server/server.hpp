@@ -1,10 +1,12 @@
 // The OPC UA server: endpoints, sessions and service dispatch on top of the opc.tcp
 // transport and the address space.
 //
-// Threading: the server owns one network thread. Every service runs on it, so services must
-// be quick; long-running work (a method that moves a robot) completes later from any thread
-// through the method's completion callback. Applications change the address space from
-// their own threads through Server::post() or the address space's thread-safe value setters.
+// Threading: each client connection has a thread of its own; services run on it under the
+// transport's network lock, one at a time across the server (see transport/tcp_server.hpp),
+// so services must be quick; long-running work (a method that moves a robot) completes later
+// from any thread through the method's completion callback. Applications change the address
+// space from their own threads through Server::post() or the address space's thread-safe
+// value setters. "The network thread" below: whichever thread holds the network lock.
 #pragma once
 
 #include <atomic>
@@ -71,14 +73,15 @@ class Server : public transport::ServiceHandler {
     AddressSpace& addressSpace() { return *addressSpace_; }
     UInt16 addNamespace(const std::string& uri);
 
-    void start();  // binds and starts the network thread; throws on bind failure
-    void stop();   // closes every connection and joins the network thread
+    void start();  // binds and starts the transport's threads; throws on bind failure
+    void stop();   // closes every connection and joins the transport's threads
     bool running() const;
     UInt16 port() const;
     std::string endpointUrl() const;  // opc.tcp://publicHost:port/path
     const ServerConfig& config() const { return config_; }
 
-    // Runs fn on the network thread (immediately if called from it).
+    // Runs fn on the network thread, i.e. under the network lock (immediately if called
+    // under it).
     void post(std::function<void()> fn);
 
     // Open sessions (any thread).

@@ -419,7 +419,8 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         const TimePoint until = Clock::now() + kLinger;
         auto msLeft = [&] {
             auto d = std::chrono::duration_cast<std::chrono::milliseconds>(until - Clock::now());
-            return static_cast<int>(std::clamp<std::int64_t>(d.count(), 0, kConnectionPoll.count()));
+            return static_cast<int>(
+                std::clamp<std::int64_t>(d.count(), 0, kConnectionPoll.count()));
         };
         for (;;) {
             WriteResult w = writeQueued();

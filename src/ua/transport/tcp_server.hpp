@@ -35,8 +35,8 @@
 //
 // Memory per connection: its thread, the receive buffer (receiveBufferSize + 16 KiB,
 // allocated once), one message being reassembled (at most maxMessageSize) and the responses
-// waiting for the socket. While more than 4 MiB of responses wait (a client that sends but does not read),
-// the connection stops reading requests until the backlog drains.
+// waiting for the socket. While more than 4 MiB of responses wait (a client that sends but
+// does not read), the connection stops reading requests until the backlog drains.
 #pragma once
 
 #include <chrono>

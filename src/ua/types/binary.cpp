@@ -128,9 +128,7 @@ Byte decodeNodeId(BinaryDecoder& d, NodeId& v) {
         }
         case kString: {
             UInt16 ns = d.number<UInt16>();
-            std::string s;
-            d.lengthPrefixed(s);
-            v = NodeId(ns, std::move(s));
+            d.lengthPrefixed(v.setString(ns));
             break;
         }
         case kGuid: {
@@ -142,9 +140,7 @@ Byte decodeNodeId(BinaryDecoder& d, NodeId& v) {
         }
         case kByteString: {
             UInt16 ns = d.number<UInt16>();
-            ByteString s;
-            d.lengthPrefixed(s.bytes);
-            v = NodeId(ns, std::move(s));
+            d.lengthPrefixed(v.setOpaque(ns));
             break;
         }
         default:

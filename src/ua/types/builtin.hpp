@@ -125,6 +125,18 @@ class NodeId {
 
     UInt16 namespaceIndex() const { return ns_; }
     void setNamespaceIndex(UInt16 ns) { ns_ = ns; }
+    // Makes this a String / Opaque NodeId and returns its identifier to fill in place (a
+    // decoder reuses the storage instead of building a temporary).
+    std::string& setString(UInt16 ns) {
+        ns_ = ns;
+        if (id_.index() != 1) id_.emplace<1>();
+        return std::get<1>(id_);
+    }
+    std::string& setOpaque(UInt16 ns) {
+        ns_ = ns;
+        if (id_.index() != 3) id_.emplace<3>();
+        return std::get<3>(id_).bytes;
+    }
     IdType idType() const { return static_cast<IdType>(id_.index()); }
     bool isNull() const;
     bool isNumeric() const { return id_.index() == 0; }

@@ -37,7 +37,7 @@ using namespace std::chrono_literals;
 class EchoHandler : public ServiceHandler {
   public:
     void onRequest(const std::shared_ptr<ServerConnection>& c, const IncomingRequest& r) override {
-        allocationsSeen.store(t_allocations);  // this thread's count before this request
+        allocationsSeen.store(t_allocations);             // this thread's count before this request
         Buffer m = ServerConnection::newMessageBuffer();  // the one expected allocation
         BinaryEncoder e(m);
         encode(e, NodeId(1, 2));

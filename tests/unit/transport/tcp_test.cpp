@@ -55,6 +55,12 @@ Buffer requestMessage(const NodeId& type, const Buffer& body) {
 class Handler : public ServiceHandler {
   public:
     void onRequest(const std::shared_ptr<ServerConnection>& c, const IncomingRequest& r) override {
+        // Handlers run one at a time (the network lock), whichever connection they serve.
+        if (inside.fetch_add(1) != 0) overlaps.fetch_add(1);
+        struct Leave {
+            std::atomic<int>& n;
+            ~Leave() { n.fetch_sub(1); }
+        } leave{inside};
         requests.fetch_add(1);
         if (r.typeId == kEcho) {
             Buffer m = ServerConnection::newMessageBuffer();
@@ -103,6 +109,8 @@ class Handler : public ServiceHandler {
 
     std::atomic<int> requests{0};
     std::atomic<int> closed{0};
+    std::atomic<int> inside{0};
+    std::atomic<int> overlaps{0};
     std::mutex mutex;
     std::vector<std::thread> workers;
 };
@@ -260,6 +268,35 @@ TEST_F(TcpTest, PipelinedRequests) {
         EXPECT_EQ(r->body, pattern(100, static_cast<unsigned>(got)));
         ++got;
     }
+}
+
+// Every connection has its own thread; the handler still sees one request at a time, and
+// every client gets exactly its own responses.
+TEST_F(TcpTest, ConcurrentClientsAreServedOneHandlerAtATime) {
+    start();
+    constexpr int kClients = 6;
+    constexpr int kRequests = 300;
+    std::atomic<int> wrong{0};
+    std::vector<std::thread> clients;
+    for (int k = 0; k < kClients; ++k) {
+        clients.emplace_back([&, k] {
+            try {
+                auto c = connect();
+                for (int i = 0; i < kRequests; ++i) {
+                    Buffer body = pattern(16 + static_cast<std::size_t>(i % 200),
+                                          static_cast<unsigned>(k * 1000 + i));
+                    if (!(roundTrip(*c, body).body == body)) wrong.fetch_add(1);
+                }
+            } catch (const std::exception&) {
+                wrong.fetch_add(1000);
+            }
+        });
+    }
+    for (auto& t : clients) t.join();
+    EXPECT_EQ(wrong.load(), 0);
+    EXPECT_EQ(handler.overlaps.load(), 0);
+    EXPECT_GE(handler.requests.load(), kClients * kRequests);
+    expectObserverWorks();
 }
 
 TEST_F(TcpTest, ResponseFromWorkerThread) {
@@ -675,6 +712,35 @@ TEST_F(TcpTest, StopClosesEverything) {
     } catch (const TransportError& e) {
         EXPECT_EQ(e.status(), status::BadConnectionClosed);
     }
+    observer.reset();
+}
+
+TEST_F(TcpTest, StopWhileClientsAreBusy) {
+    start();
+    constexpr int kClients = 4;
+    std::atomic<bool> go{true};
+    std::atomic<int> connected{0};
+    std::vector<std::thread> clients;
+    for (int k = 0; k < kClients; ++k) {
+        clients.emplace_back([&] {
+            try {
+                auto c = connect();
+                connected.fetch_add(1);
+                Buffer body = pattern(3000);
+                for (int i = 0; i < 100000 && go.load(); ++i) roundTrip(*c, body);
+            } catch (const std::exception&) {
+                // the server went away: expected
+            }
+        });
+    }
+    EXPECT_TRUE(eventually([&] { return connected.load() == kClients; }));
+    std::this_thread::sleep_for(50ms);
+    auto t0 = Clock::now();
+    server->stop();
+    EXPECT_LT(Clock::now() - t0, 2s);
+    EXPECT_EQ(handler.closed.load(), kClients + 1);  // + the observer
+    go = false;
+    for (auto& t : clients) t.join();
     observer.reset();
 }
 
