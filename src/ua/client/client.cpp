@@ -282,8 +282,9 @@ class Client::Impl {
         // The precise time the deadline was resolved at, unless the coarse clock is later.
         Clock::time_point now = std::max(resolvedAt, transport::coarseNow());
         Buffer buffer = conn->messageBuffer();
-        encode(buffer, makeHeader(now, deadline));
-        UInt32 id = conn->send(std::move(buffer), deadline);
+        Splices splices;  // large byte runs stay in the request (sent before send() returns)
+        encode(buffer, makeHeader(now, deadline), &splices);
+        UInt32 id = conn->send(std::move(buffer), std::move(splices), deadline);
         sent = true;
         ++stats.requestsSent;
         lastSend = now;
@@ -507,8 +508,9 @@ class Client::Impl {
             try {
                 Clock::time_point now = std::max(resolvedAt, transport::coarseNow());
                 Buffer buffer = conn->messageBuffer();
-                encode(buffer, makeHeader(now, deadline));
-                UInt32 id = conn->send(std::move(buffer), deadline);
+                Splices splices;
+                encode(buffer, makeHeader(now, deadline), &splices);
+                UInt32 id = conn->send(std::move(buffer), std::move(splices), deadline);
                 ++stats.requestsSent;
                 lastSend = now;
                 pending.insert_or_assign(id, Pending{deadline, std::move(callback), service});

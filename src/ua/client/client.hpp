@@ -260,15 +260,19 @@ class Client {
   private:
     // Appends the request (encoding NodeId + body) to `buffer`, with `header` encoded in
     // place of the request's own RequestHeader (no copy of the authentication token).
+    // With `splices`, large byte runs of the request are referenced, not copied: the
+    // request must stay unchanged until the message is sent.
     struct EncodeRef {
         const void* object;
-        void (*function)(const void*, Buffer&, const RequestHeader&);
-        void operator()(Buffer& b, const RequestHeader& h) const { function(object, b, h); }
+        void (*function)(const void*, Buffer&, const RequestHeader&, Splices*);
+        void operator()(Buffer& b, const RequestHeader& h, Splices* splices = nullptr) const {
+            function(object, b, h, splices);
+        }
     };
     template <class Req>
     static EncodeRef encoderFor(const Req& req) {
-        return {&req, [](const void* p, Buffer& b, const RequestHeader& h) {
-                    detail::encodeRequest(b, *static_cast<const Req*>(p), h);
+        return {&req, [](const void* p, Buffer& b, const RequestHeader& h, Splices* splices) {
+                    detail::encodeRequest(b, *static_cast<const Req*>(p), h, splices);
                 }};
     }
     // Decodes a response while the client's lock is still held: its body may be a view of

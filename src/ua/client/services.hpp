@@ -156,10 +156,12 @@ void encodeBody(BinaryEncoder& e, const Req& r, const RequestHeader& h) {
     encodeAfterRequestHeader(e, r);
 }
 
-// Appends "encoding NodeId + body" of a request to a message buffer.
+// Appends "encoding NodeId + body" of a request to a message buffer. With `splices`, large
+// byte runs are referenced in the request instead of copied (see BinaryEncoder).
 template <class Req>
-void encodeRequest(Buffer& out, const Req& req, const RequestHeader& header) {
-    BinaryEncoder e(out);
+void encodeRequest(Buffer& out, const Req& req, const RequestHeader& header,
+                   Splices* splices = nullptr) {
+    BinaryEncoder e(out, splices);
     encode(e, NodeId(0, DataTypeInfo<Req>::binaryEncodingId));
     encodeBody(e, req, header);
 }

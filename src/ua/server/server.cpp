@@ -213,11 +213,19 @@ void sendResponse(transport::ServerConnection& conn, UInt32 requestId, UInt32 re
         conn.sendServiceFault(requestId, requestHandle, resp.responseHeader.serviceResult);
         return;
     }
+    // Large byte runs (a 32 KiB ByteString) are not copied into the message: the response
+    // itself is kept until they are written (moving it keeps their heap storage in place).
     Buffer b = transport::ServerConnection::newMessageBuffer();
-    BinaryEncoder e(b);
+    Splices splices;
+    BinaryEncoder e(b, &splices);
     encode(e, NodeId(0, DataTypeInfo<Resp>::binaryEncodingId));
     encode(e, resp);
-    conn.send(requestId, std::move(b));
+    if (splices.empty()) {
+        conn.send(requestId, std::move(b));
+        return;
+    }
+    auto keep = std::make_shared<Resp>(std::move(resp));
+    conn.sendSpliced(requestId, std::move(b), std::move(splices), std::move(keep));
 }
 }  // namespace
 

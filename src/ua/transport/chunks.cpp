@@ -259,6 +259,22 @@ void writeSymmetricChunks(Buffer& message, MessageType type, UInt32 channelId, U
     }
 }
 
+Splices writeSymmetricChunks(Buffer& message, Splices&& splices, MessageType type, UInt32 channelId,
+                             UInt32 tokenId, UInt32 requestId, SequenceGenerator& sequence,
+                             std::size_t maxChunkSize) {
+    if (!splices.empty()) {
+        const std::size_t total = message.size() + splicedSize(splices);
+        if (chunkCount(total - kSymmetricHeaderSize, maxChunkSize) == 1) {
+            writeSymmetricHeader(message.data(), type, ChunkType::Final, total, channelId, tokenId,
+                                 sequence.next(), requestId);
+            return std::move(splices);
+        }
+        message = joinSplices(std::move(message), splices);
+    }
+    writeSymmetricChunks(message, type, channelId, tokenId, requestId, sequence, maxChunkSize);
+    return {};
+}
+
 Buffer makeOpenChunk(UInt32 channelId, UInt32 sequenceNumber, UInt32 requestId, const Byte* body,
                      std::size_t size) {
     Buffer b;

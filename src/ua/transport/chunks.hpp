@@ -214,6 +214,12 @@ std::size_t chunkCount(std::size_t bodySize, std::size_t maxChunkSize);
 // apart inside the same buffer. Takes one sequence number per chunk.
 void writeSymmetricChunks(Buffer& message, MessageType type, UInt32 channelId, UInt32 tokenId,
                           UInt32 requestId, SequenceGenerator& sequence, std::size_t maxChunkSize);
+// The same for a message with spliced byte runs (BinaryEncoder with Splices): one chunk is
+// sent as it is, the splices written from where they are; several are joined first.
+// Returns the splices still to be written around `message` (empty after a join).
+Splices writeSymmetricChunks(Buffer& message, Splices&& splices, MessageType type, UInt32 channelId,
+                             UInt32 tokenId, UInt32 requestId, SequenceGenerator& sequence,
+                             std::size_t maxChunkSize);
 
 // One OPN chunk with the SecurityPolicy None asymmetric header (null certificate and
 // thumbprint) around `body` (type NodeId + encoded Open request / response).

@@ -11,8 +11,10 @@
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
+#include <climits>
 #include <cstring>
 
+#include "ua/transport/gather.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::transport {
@@ -193,14 +195,31 @@ void ClientConnection::failClosed(StatusCode status, const std::string& what) {
 }
 
 void ClientConnection::write(Buffer&& bytes) {
+    iovec v{bytes.data(), bytes.size()};
+    writeAll(&v, 1);
+    keepForReuse(std::move(bytes));
+}
+
+void ClientConnection::writeSpliced(Buffer&& bytes, const Splices& splices) {
+    std::vector<iovec> v;
+    v.reserve(2 * splices.size() + 1);
+    forEachPiece(bytes, splices, 0, [&](const Byte* p, std::size_t n) {
+        v.push_back({const_cast<Byte*>(p), n});
+        return true;
+    });
+    writeAll(v.data(), v.size());
+    keepForReuse(std::move(bytes));
+}
+
+void ClientConnection::writeAll(iovec* iov, std::size_t count) {
     if (fd_ < 0) throw TransportError(status::BadConnectionClosed, "connection closed");
-    const Byte* p = bytes.data();
-    std::size_t left = bytes.size();
-    while (left > 0) {
-        ssize_t n = ::send(fd_, p, left, MSG_NOSIGNAL | MSG_DONTWAIT);
+    while (count > 0) {
+        msghdr m{};
+        m.msg_iov = iov;
+        m.msg_iovlen = std::min<std::size_t>(count, IOV_MAX);
+        ssize_t n = ::sendmsg(fd_, &m, MSG_NOSIGNAL | MSG_DONTWAIT);
         if (n > 0) {
-            p += n;
-            left -= static_cast<std::size_t>(n);
+            iov = advanceIovecs(iov, count, static_cast<std::size_t>(n));
             continue;
         }
         int err = n < 0 ? errno : EPIPE;
@@ -214,6 +233,9 @@ void ClientConnection::write(Buffer&& bytes) {
                                                      : status::BadCommunicationError,
                    "send: " + errnoText(err));
     }
+}
+
+void ClientConnection::keepForReuse(Buffer&& bytes) {
     // Kept for the next request's memory; a large one is not: one big request should not
     // pin its memory.
     constexpr std::size_t kKeepUpTo = 64 * 1024;
@@ -314,13 +336,16 @@ UInt32 ClientConnection::send(Buffer&& message) {
 }
 
 UInt32 ClientConnection::send(Buffer&& message, Deadline deadline) {
+    return send(std::move(message), Splices{}, deadline);
+}
+
+UInt32 ClientConnection::send(Buffer&& message, Splices&& splices, Deadline deadline) {
     if (!isOpen()) throw TransportError(status::BadConnectionClosed, "connection closed");
     writeDeadline_ = deadline;
     channel_.renewIfDue(coarseNow());
     // A renew response that is already there switches us to the new token before sending.
     if (channel_.renewPending()) drainAvailable();
-    UInt32 id = channel_.send(std::move(message));
-    return id;
+    return channel_.send(std::move(message), std::move(splices));
 }
 
 std::optional<IncomingResponse> ClientConnection::receive(Deadline deadline) {

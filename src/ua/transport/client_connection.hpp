@@ -34,6 +34,8 @@
 // Not thread-safe: one thread at a time.
 #pragma once
 
+#include <sys/uio.h>
+
 #include <deque>
 #include <memory>
 #include <optional>
@@ -70,6 +72,9 @@ class ClientConnection final : private ClientChannel::Hooks {
     // request id assigned to it. The default deadline is now + config.sendTimeout.
     UInt32 send(Buffer&& message);
     UInt32 send(Buffer&& message, Deadline deadline);
+    // A message encoded with Splices: the referenced bytes are written from where they are
+    // (or copied when the message needs several chunks) before send() returns.
+    UInt32 send(Buffer&& message, Splices&& splices, Deadline deadline);
 
     // The next response (any request id, in arrival order), nullopt when the deadline
     // passed first. Deadline in the past: only what is already there (non-blocking).
@@ -97,6 +102,10 @@ class ClientConnection final : private ClientChannel::Hooks {
   private:
     ClientConnection(const std::string& url, const ClientConfig& config);
     void write(Buffer&& bytes) override;
+    void writeSpliced(Buffer&& bytes, const Splices& splices) override;
+    // Writes everything (blocking until writeDeadline_).
+    void writeAll(::iovec* iov, std::size_t count);
+    void keepForReuse(Buffer&& bytes);
     void response(IncomingResponse&& response) override;
     // Reads once (waiting until `deadline`) and feeds the channel. False on timeout.
     bool readOnce(Deadline deadline);

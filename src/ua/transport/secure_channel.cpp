@@ -278,11 +278,18 @@ bool ServerChannel::send(UInt32 requestId, Buffer&& message) {
     return sendMessage(requestId, std::move(message), false);
 }
 
-bool ServerChannel::sendMessage(UInt32 requestId, Buffer&& message, bool isFault) {
+bool ServerChannel::send(UInt32 requestId, Buffer&& message, Splices&& splices,
+                         std::shared_ptr<const void> keepAlive) {
+    return sendMessage(requestId, std::move(message), false, std::move(splices),
+                       std::move(keepAlive));
+}
+
+bool ServerChannel::sendMessage(UInt32 requestId, Buffer&& message, bool isFault, Splices&& splices,
+                                std::shared_ptr<const void> keepAlive) {
     if (state_ != State::Open) return false;
     if (message.size() < kSymmetricHeaderSize) return false;
     if (previous_) dropExpiredPrevious(Clock::now());
-    const std::size_t body = message.size() - kSymmetricHeaderSize;
+    const std::size_t body = message.size() + splicedSize(splices) - kSymmetricHeaderSize;
     const std::size_t chunks = chunkCount(body, limits_.sendBufferSize);
     if (exceedsPeerLimits(limits_, body, chunks)) {
         // Limits so small that not even a ServiceFault fits (found by the fuzzer): the
@@ -295,9 +302,19 @@ bool ServerChannel::sendMessage(UInt32 requestId, Buffer&& message, bool isFault
         return sendServiceFault(requestId, responseRequestHandle(message),
                                 status::BadResponseTooLarge);
     }
-    writeSymmetricChunks(message, MessageType::Message, channelId_, sendTokenId_, requestId,
-                         sendSequence_, limits_.sendBufferSize);
-    hooks_.write(std::move(message));
+    if (splices.empty()) {
+        writeSymmetricChunks(message, MessageType::Message, channelId_, sendTokenId_, requestId,
+                             sendSequence_, limits_.sendBufferSize);
+        hooks_.write(std::move(message));
+        return true;
+    }
+    Splices left =
+        writeSymmetricChunks(message, std::move(splices), MessageType::Message, channelId_,
+                             sendTokenId_, requestId, sendSequence_, limits_.sendBufferSize);
+    if (left.empty())
+        hooks_.write(std::move(message));
+    else
+        hooks_.writeSpliced(std::move(message), std::move(left), std::move(keepAlive));
     return true;
 }
 
@@ -579,12 +596,14 @@ void ClientChannel::writeOpenRequest(bool renew, TimePoint /*now*/) {
     hooks_.write(std::move(chunk));
 }
 
-UInt32 ClientChannel::send(Buffer&& message) {
+UInt32 ClientChannel::send(Buffer&& message) { return send(std::move(message), Splices{}); }
+
+UInt32 ClientChannel::send(Buffer&& message, Splices&& splices) {
     if (state_ != State::Open)
         throw TransportError(status::BadSecureChannelClosed, "secure channel not open");
     if (message.size() < kSymmetricHeaderSize)
         throw std::invalid_argument("message buffer without the reserved header bytes");
-    const std::size_t body = message.size() - kSymmetricHeaderSize;
+    const std::size_t body = message.size() + splicedSize(splices) - kSymmetricHeaderSize;
     const std::size_t chunks = chunkCount(body, limits_.sendBufferSize);
     if (exceedsPeerLimits(limits_, body, chunks)) {
         throw TransportError(status::BadRequestTooLarge,
@@ -594,9 +613,13 @@ UInt32 ClientChannel::send(Buffer&& message) {
                                  std::to_string(limits_.maxSendChunkCount) + " chunks");
     }
     const UInt32 id = nextRequestId();
-    writeSymmetricChunks(message, MessageType::Message, channelId_, current_.tokenId, id,
-                         sendSequence_, limits_.sendBufferSize);
-    hooks_.write(std::move(message));
+    Splices left =
+        writeSymmetricChunks(message, std::move(splices), MessageType::Message, channelId_,
+                             current_.tokenId, id, sendSequence_, limits_.sendBufferSize);
+    if (left.empty())
+        hooks_.write(std::move(message));
+    else
+        hooks_.writeSpliced(std::move(message), left);
     return id;
 }
 

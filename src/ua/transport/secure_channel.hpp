@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -154,6 +155,13 @@ class ServerChannel {
       public:
         // Bytes to write: one or more complete chunks, in order.
         virtual void write(Buffer&& bytes) = 0;
+        // One chunk whose spliced byte runs are written from where they are; keepAlive holds
+        // them until then. By default joined and written with write().
+        virtual void writeSpliced(Buffer&& bytes, Splices&& splices,
+                                  std::shared_ptr<const void> keepAlive) {
+            (void)keepAlive;
+            write(joinSplices(std::move(bytes), splices));
+        }
         // A complete MSG. The I/O layer hands it to the ServiceHandler. Exceptions escaping
         // it close the connection with ERR BadTcpInternalError.
         virtual void request(const IncomingRequest& request) = 0;
@@ -183,6 +191,10 @@ class ServerChannel {
     // headers: the spec counts the body, some stacks the whole chunks; this satisfies both.
     // False when the channel is not open (message dropped).
     bool send(UInt32 requestId, Buffer&& message);
+    // The same for a message encoded with Splices (large byte runs referenced, not copied);
+    // keepAlive holds the referenced bytes until they are written.
+    bool send(UInt32 requestId, Buffer&& message, Splices&& splices,
+              std::shared_ptr<const void> keepAlive);
     bool sendServiceFault(UInt32 requestId, UInt32 requestHandle, StatusCode status);
 
     // Timeouts: HEL/OPN not completed in time, idle connection, token expired.
@@ -207,7 +219,8 @@ class ServerChannel {
 
   private:
     // send(); `isFault`: the message is the ServiceFault replacing a response too large.
-    bool sendMessage(UInt32 requestId, Buffer&& message, bool isFault);
+    bool sendMessage(UInt32 requestId, Buffer&& message, bool isFault, Splices&& splices = {},
+                     std::shared_ptr<const void> keepAlive = {});
     void handleChunk(const RawChunk& raw, TimePoint now);
     void handleHello(const RawChunk& raw);
     void handleSecureChunk(const RawChunk& raw, TimePoint now);
@@ -243,6 +256,11 @@ class ClientChannel {
     class Hooks {
       public:
         virtual void write(Buffer&& bytes) = 0;
+        // One chunk whose spliced byte runs are written from where they are (before send()
+        // returns). By default joined and written with write().
+        virtual void writeSpliced(Buffer&& bytes, const Splices& splices) {
+            write(joinSplices(std::move(bytes), splices));
+        }
         // A complete MSG response, or an aborted one (IncomingResponse::status).
         virtual void response(IncomingResponse&& response) = 0;
 
@@ -272,6 +290,9 @@ class ClientChannel {
     // ServerChannel::send; nothing is written, the channel stays open),
     // BadSecureChannelClosed when the channel is not open.
     UInt32 send(Buffer&& message);
+    // The same for a message encoded with Splices; the referenced bytes are written (or
+    // copied) before it returns.
+    UInt32 send(Buffer&& message, Splices&& splices);
     // Sends an OpenSecureChannel renew request when 75 % of the token lifetime has passed
     // and none is outstanding. True when one was written.
     bool renewIfDue(TimePoint now);

@@ -18,6 +18,7 @@
 #include <unordered_set>
 #include <vector>
 
+#include "ua/transport/gather.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::transport {
@@ -189,6 +190,23 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         });
     }
 
+    void sendSpliced(UInt32 requestId, Buffer&& message, Splices&& splices,
+                     std::shared_ptr<const void> keepAlive) override {
+        if (message.size() < kSymmetricHeaderSize)
+            throw std::invalid_argument("ServerConnection::send: buffer without header space");
+        if (isClosed()) return;
+        if (server_.holdsNetworkLock()) {
+            sendSplicedHere(requestId, std::move(message), std::move(splices),
+                            std::move(keepAlive));
+            return;
+        }
+        asio::post(server_.io, [self = self(), requestId, m = std::move(message),
+                                sp = std::move(splices), k = std::move(keepAlive)]() mutable {
+            NetworkLock lock(self->server_);
+            self->sendSplicedHere(requestId, std::move(m), std::move(sp), std::move(k));
+        });
+    }
+
     void sendServiceFault(UInt32 requestId, UInt32 requestHandle, StatusCode status) override {
         if (isClosed()) return;
         if (server_.holdsNetworkLock()) {
@@ -291,11 +309,11 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         for (;;) {
             std::size_t count = 0;
             for (std::size_t k = outHead_; k < out_.size() && count < kMaxIov; ++k) {
-                const Buffer& b = out_[k];
-                std::size_t skip = count == 0 ? frontWritten_ : 0;
-                iov[count].iov_base = const_cast<Byte*>(b.data()) + skip;
-                iov[count].iov_len = b.size() - skip;
-                ++count;
+                forEachPiece(out_[k].bytes, out_[k].splices, k == outHead_ ? frontWritten_ : 0,
+                             [&](const Byte* p, std::size_t n) {
+                                 iov[count++] = iovec{const_cast<Byte*>(p), n};
+                                 return count < kMaxIov;
+                             });
             }
             q.unlock();  // others may append meanwhile; only the writer removes
             msghdr msg{};
@@ -314,14 +332,14 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             }
             auto left = static_cast<std::size_t>(n);
             while (left > 0) {
-                std::size_t rest = out_[outHead_].size() - frontWritten_;
+                std::size_t rest = out_[outHead_].size - frontWritten_;
                 if (left < rest) {
                     frontWritten_ += left;
                     break;
                 }
                 left -= rest;
-                queued_ -= out_[outHead_].size();
-                out_[outHead_++] = Buffer();  // its memory goes now
+                queued_ -= out_[outHead_].size;
+                out_[outHead_++] = Outgoing();  // its memory goes now
                 frontWritten_ = 0;
             }
             if (outHead_ == out_.size()) {
@@ -372,7 +390,20 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         {
             std::lock_guard q(outMutex_);
             queued_ += bytes.size();
-            out_.push_back(std::move(bytes));
+            const std::size_t n = bytes.size();
+            out_.push_back(Outgoing{std::move(bytes), {}, {}, n});
+        }
+        markDirty();
+    }
+
+    void writeSpliced(Buffer&& bytes, Splices&& splices,
+                      std::shared_ptr<const void> keepAlive) override {
+        if (finished_) return;
+        {
+            std::lock_guard q(outMutex_);
+            const std::size_t n = bytes.size() + splicedSize(splices);
+            queued_ += n;
+            out_.push_back(Outgoing{std::move(bytes), std::move(splices), std::move(keepAlive), n});
         }
         markDirty();
     }
@@ -391,6 +422,13 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     void sendHere(UInt32 requestId, Buffer&& message) {
         if (closing_ || finished_) return;
         channel_.send(requestId, std::move(message));
+        noteClosed();
+    }
+
+    void sendSplicedHere(UInt32 requestId, Buffer&& message, Splices&& splices,
+                         std::shared_ptr<const void> keepAlive) {
+        if (closing_ || finished_) return;
+        channel_.send(requestId, std::move(message), std::move(splices), std::move(keepAlive));
         noteClosed();
     }
 
@@ -480,9 +518,16 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     std::condition_variable writerDone_;
     bool writing_ = false;  // a thread is writing (outside outMutex_, during sendmsg)
     bool broken_ = false;   // socket error or finished: nobody writes any more
+    // A chunk to write: its bytes, with spliced runs held by keepAlive; size: of both.
+    struct Outgoing {
+        Buffer bytes;
+        Splices splices;
+        std::shared_ptr<const void> keepAlive;
+        std::size_t size = 0;
+    };
     // Queued output: out_[outHead_ ...] (a vector rather than a deque: no allocation per
     // response once it has grown; emptied when everything is written).
-    std::vector<Buffer> out_;
+    std::vector<Outgoing> out_;
     std::size_t outHead_ = 0;
     std::size_t frontWritten_ = 0;  // bytes of out_[outHead_] already written
     std::size_t queued_ = 0;        // bytes in out_

@@ -75,6 +75,14 @@ class ServerConnection : public std::enable_shared_from_this<ServerConnection> {
     // BadResponseTooLarge. Dropped silently when the connection is closed.
     // Throws std::invalid_argument when message is shorter than kSymmetricHeaderSize.
     virtual void send(UInt32 requestId, Buffer&& message) = 0;
+    // The same for a message encoded with Splices (large byte runs referenced, not
+    // copied): keepAlive holds the referenced bytes until they are written. The default
+    // joins them into the buffer.
+    virtual void sendSpliced(UInt32 requestId, Buffer&& message, Splices&& splices,
+                             std::shared_ptr<const void> keepAlive) {
+        (void)keepAlive;
+        send(requestId, joinSplices(std::move(message), splices));
+    }
     // Sends a ServiceFault (ResponseHeader with serviceResult = status).
     virtual void sendServiceFault(UInt32 requestId, UInt32 requestHandle, StatusCode status) = 0;
     // Closes the connection (no ERR). Pending responses are written first. onConnectionClosed

@@ -360,4 +360,28 @@ void decode(BinaryDecoder& d, DataValue& v) {
     if (mask & 0x20) v.serverPicoseconds = d.number<UInt16>();
 }
 
+// ---- splices ------------------------------------------------------------------------------
+std::size_t splicedSize(const Splices& s) {
+    std::size_t n = 0;
+    for (const Splice& x : s) n += x.size;
+    return n;
+}
+
+Buffer joinSplices(Buffer&& b, const Splices& s) {
+    if (s.empty()) return std::move(b);
+    Buffer out;
+    out.resize(b.size() + splicedSize(s));
+    std::size_t from = 0;
+    Byte* to = out.data();
+    for (const Splice& x : s) {
+        std::memcpy(to, b.data() + from, x.at - from);
+        to += x.at - from;
+        from = x.at;
+        std::memcpy(to, x.data, x.size);
+        to += x.size;
+    }
+    std::memcpy(to, b.data() + from, b.size() - from);
+    return out;
+}
+
 }  // namespace pnp::ua

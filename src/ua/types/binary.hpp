@@ -62,9 +62,30 @@ struct UninitializedAllocator : std::allocator<T> {
 
 using Buffer = std::vector<Byte, UninitializedAllocator<Byte>>;
 
+// Bytes an encoder referenced instead of copying them (see BinaryEncoder): they belong at
+// position `at` of the encoded Buffer, before the byte that is there. Whoever sends the
+// Buffer writes them from where they are (scatter-gather), or joins them in (joinSplices).
+struct Splice {
+    std::size_t at;
+    const Byte* data;
+    std::size_t size;
+};
+using Splices = std::vector<Splice>;
+// Length-prefixed runs at least this long are worth referencing (a copy of 4 KiB costs
+// about what the bookkeeping of a splice does).
+inline constexpr std::size_t kDefaultSpliceMin = 4096;
+std::size_t splicedSize(const Splices& s);
+// The Buffer with the spliced bytes copied in at their places.
+Buffer joinSplices(Buffer&& b, const Splices& s);
+
 class BinaryEncoder {
   public:
     explicit BinaryEncoder(Buffer& out) : out_(out) {}
+    // Length-prefixed byte runs (String, ByteString, XmlElement, ExtensionObject bodies) of at
+    // least minSize bytes are appended to *splices instead of copied: the referenced bytes
+    // must stay where they are, unchanged, until the Buffer has been sent.
+    BinaryEncoder(Buffer& out, Splices* splices, std::size_t minSize = kDefaultSpliceMin)
+        : out_(out), splices_(splices), spliceMin_(minSize) {}
 
     void raw(const void* p, std::size_t n) {
         if (n == 0) return;
@@ -85,6 +106,10 @@ class BinaryEncoder {
     // Length-prefixed bytes (String, ByteString, XmlElement).
     void lengthPrefixed(const std::string& s) {
         number<Int32>(static_cast<Int32>(s.size()));
+        if (splices_ != nullptr && s.size() >= spliceMin_) {
+            splices_->push_back({out_.size(), reinterpret_cast<const Byte*>(s.data()), s.size()});
+            return;
+        }
         raw(s.data(), s.size());
     }
     Buffer& buffer() { return out_; }
@@ -97,6 +122,8 @@ class BinaryEncoder {
         out_.reserve(std::max(out_.capacity() * 2, out_.size() + n + 1024));
     }
     Buffer& out_;
+    Splices* splices_ = nullptr;
+    std::size_t spliceMin_ = kDefaultSpliceMin;
 };
 
 class BinaryDecoder {

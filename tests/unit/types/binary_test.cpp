@@ -166,3 +166,33 @@ TEST(BinaryDecoding, EveryTruncationOfAValidMessageFailsCleanly) {
         EXPECT_TRUE(decodeStatus(cut).isBad()) << n;
     }
 }
+
+// An encoder with Splices references long byte runs instead of copying them; joined back in,
+// the message is byte for byte the plain encoding.
+TEST(BinarySplices, JoinedEqualsPlainEncoding) {
+    std::vector<Variant> values{
+        Variant(ByteString(std::string(5000, 'x'))), Variant(Int32(3)),
+        Variant(String(std::string(4096, 's'))), Variant(ByteString(std::string(4095, 'y'))),
+        Variant(std::vector<ByteString>{ByteString(std::string(9000, 'z')), ByteString("short")})};
+    Buffer plain;
+    {
+        BinaryEncoder e(plain);
+        encode(e, values);
+    }
+    Buffer withHoles;
+    Splices splices;
+    {
+        BinaryEncoder e(withHoles, &splices);
+        encode(e, values);
+    }
+    ASSERT_EQ(splices.size(), 3u);  // 5000, 4096 and 9000 bytes; 4095 is copied
+    EXPECT_EQ(withHoles.size() + splicedSize(splices), plain.size());
+    EXPECT_EQ(joinSplices(std::move(withHoles), splices), plain);
+    // Without Splices nothing changes.
+    Buffer again;
+    {
+        BinaryEncoder e(again, nullptr);
+        encode(e, values);
+    }
+    EXPECT_EQ(again, plain);
+}
