@@ -318,6 +318,24 @@ async function main() {
         expect(Buffer.isBuffer(out[0].value) && out[0].value.equals(data), `got ${describeVariant(out[0])}`);
     });
 
+    for (const size of [20000, 300000]) {
+        // One chunk (written by scatter-gather by pnp) and several chunks.
+        await check(`Call Demo.Echo(ByteString of ${size} bytes) returns the same bytes`, async () => {
+            const data = Buffer.alloc(size);
+            for (let i = 0; i < size; ++i) data[i] = (i * 31) >> 3;
+            const res = await session.call({
+                objectId: DEMO,
+                methodId: demoId("Demo.Echo"),
+                inputArguments: [new Variant({ dataType: DataType.ByteString, value: data })],
+            });
+            expectGood(res.statusCode, "call");
+            const out = res.outputArguments || [];
+            expect(out.length === 1, `expected 1 output argument, got ${out.length}`);
+            expect(Buffer.isBuffer(out[0].value) && out[0].value.equals(data),
+                `got ${out[0].value ? out[0].value.length : "nothing"} bytes back`);
+        });
+    }
+
     await check("Call Demo.Add(2, 3) returns Int32 5", async () => {
         const res = await session.call({
             objectId: DEMO,

@@ -448,6 +448,15 @@ TEST_F(Interop, CallEchoAndAdd) {
     ASSERT_TRUE(echo.ok()) << echo.status.toString();
     ASSERT_EQ(echo.outputs.size(), 1u);
     EXPECT_EQ(echo.outputs[0], Variant(ByteString(payload)));
+    // Large payloads leave our client by scatter-gather (one chunk) or joined (several).
+    for (std::size_t n : {20000u, 300000u}) {
+        std::string big(n, '\0');
+        for (std::size_t i = 0; i < n; ++i) big[i] = static_cast<char>((i * 31) >> 3);
+        CallResult r = c.call(obj, NodeId(demo, "Demo.Echo"), {ByteString(big)});
+        ASSERT_TRUE(r.ok()) << n << ": " << r.status.toString();
+        ASSERT_EQ(r.outputs.size(), 1u);
+        EXPECT_EQ(r.outputs[0], Variant(ByteString(big))) << n << " bytes";
+    }
 
     CallResult add = c.call(obj, NodeId(demo, "Demo.Add"), {Int32{2}, Int32{3}});
     ASSERT_TRUE(add.ok()) << add.status.toString();
