@@ -979,10 +979,7 @@ ReadRequest singleRead(const NodeId& node, AttributeId attribute, TimestampsToRe
     ReadRequest req{};
     req.maxAge = 0;
     req.timestampsToReturn = ts;
-    ReadValueId id{};
-    id.nodeId = node;
-    id.attributeId = static_cast<UInt32>(attribute);
-    req.nodesToRead.push_back(std::move(id));
+    req.nodesToRead.push_back(ReadValueId{node, static_cast<UInt32>(attribute), String(), {}});
     return req;
 }
 
@@ -999,12 +996,10 @@ Variant valueOf(DataValue&& dv, const NodeId& node) {
 }
 
 WriteRequest singleWrite(const NodeId& node, AttributeId attribute, DataValue value) {
+    // Built in place: copy-constructing the NodeId is cheaper than assigning it.
     WriteRequest req{};
-    WriteValue w{};
-    w.nodeId = node;
-    w.attributeId = static_cast<UInt32>(attribute);
-    w.value = std::move(value);
-    req.nodesToWrite.push_back(std::move(w));
+    req.nodesToWrite.push_back(
+        WriteValue{node, static_cast<UInt32>(attribute), String(), std::move(value)});
     return req;
 }
 
@@ -1016,11 +1011,7 @@ StatusCode singleStatus(WriteResponse&& resp) {
 
 CallRequest singleCall(const NodeId& object, const NodeId& method, std::vector<Variant> inputs) {
     CallRequest req{};
-    CallMethodRequest m{};
-    m.objectId = object;
-    m.methodId = method;
-    m.inputArguments = std::move(inputs);
-    req.methodsToCall.push_back(std::move(m));
+    req.methodsToCall.push_back(CallMethodRequest{object, method, std::move(inputs)});
     return req;
 }
 

@@ -291,7 +291,7 @@ long ClientConnection::receiveBlocking(std::span<Byte> space, std::chrono::nanos
 bool ClientConnection::readOnce(Deadline deadline) {
     if (fd_ < 0) throw TransportError(status::BadConnectionClosed, "connection closed");
     // Responses not yet handed out must not point into the buffer about to be read into.
-    for (auto& r : ready_) r.body.own();
+    for (std::size_t i = readyHead_; i < ready_.size(); ++i) ready_[i].body.own();
     auto space = channel_.readSpace();
     for (;;) {
         // Coarse: the deadline is kept to within a scheduler tick (see receiveBlocking).
@@ -350,9 +350,12 @@ UInt32 ClientConnection::send(Buffer&& message, Splices&& splices, Deadline dead
 
 std::optional<IncomingResponse> ClientConnection::receive(Deadline deadline) {
     for (;;) {
-        if (!ready_.empty()) {
-            IncomingResponse r = std::move(ready_.front());
-            ready_.pop_front();
+        if (readyHead_ < ready_.size()) {
+            IncomingResponse r = std::move(ready_[readyHead_++]);
+            if (readyHead_ == ready_.size()) {
+                ready_.clear();
+                readyHead_ = 0;
+            }
             return r;
         }
         if (!isOpen()) throw TransportError(status::BadConnectionClosed, "connection closed");
@@ -360,7 +363,7 @@ std::optional<IncomingResponse> ClientConnection::receive(Deadline deadline) {
         Deadline wake = deadline;
         if (!channel_.renewPending()) wake = std::min(wake, channel_.renewalDue());
         if (!readOnce(wake) && Clock::now() >= deadline) {
-            if (!ready_.empty()) continue;
+            if (readyHead_ < ready_.size()) continue;
             return std::nullopt;
         }
     }

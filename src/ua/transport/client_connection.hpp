@@ -36,10 +36,10 @@
 
 #include <sys/uio.h>
 
-#include <deque>
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "ua/transport/secure_channel.hpp"
 
@@ -118,7 +118,10 @@ class ClientConnection final : private ClientChannel::Hooks {
     ClientChannel channel_;
     int fd_ = -1;
     Deadline writeDeadline_{};
-    std::deque<IncomingResponse> ready_;
+    // Responses received, not yet handed out: ready_[readyHead_ ...] (a vector: no
+    // allocation per response once it has grown).
+    std::vector<IncomingResponse> ready_;
+    std::size_t readyHead_ = 0;
     Buffer spare_;  // the last request sent, kept for its memory (see messageBuffer())
     // SO_RCVTIMEO now set on the (blocking) socket; zero: none set yet.
     std::chrono::nanoseconds receiveTimeout_{0};
