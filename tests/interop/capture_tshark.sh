@@ -113,7 +113,9 @@ if [[ ! -s "$PCAP" ]]; then
 fi
 
 # ---- 4. decode + checks ---------------------------------------------------------------
-DECODE=(-r "$PCAP" -d "tcp.port==$PORT,opcua")
+# Two passes (-2): a chunk larger than one TCP segment is reassembled from several frames,
+# and only the second pass marks the earlier ones with tcp.reassembled_in.
+DECODE=(-2 -r "$PCAP" -d "tcp.port==$PORT,opcua")
 tshark "${DECODE[@]}" -V >"$OUT/decoded.txt" 2>"$OUT/tshark-decode.stderr"
 tshark "${DECODE[@]}" -Y opcua -T fields -e frame.number -e _ws.col.Info \
     >"$OUT/opcua-info.tsv" 2>>"$OUT/tshark-decode.stderr"
