@@ -174,20 +174,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     bool isClosed() const override { return closedFlag_.load(std::memory_order_acquire); }
 
     void send(UInt32 requestId, Buffer&& message) override {
-        if (message.size() < kSymmetricHeaderSize)
-            throw std::invalid_argument("ServerConnection::send: buffer without header space");
-        if (isClosed()) return;
-        if (server_.holdsNetworkLock()) {
-            sendHere(requestId, std::move(message));
-            return;
-        }
-        // Not under the network lock: queued to the service thread rather than taking the
-        // lock here, so that a caller holding locks of its own cannot deadlock with a
-        // handler that takes them.
-        asio::post(server_.io, [self = self(), requestId, m = std::move(message)]() mutable {
-            NetworkLock lock(self->server_);
-            self->sendHere(requestId, std::move(m));
-        });
+        sendSpliced(requestId, std::move(message), Splices{}, nullptr);
     }
 
     void sendSpliced(UInt32 requestId, Buffer&& message, Splices&& splices,
@@ -200,6 +187,9 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
                             std::move(keepAlive));
             return;
         }
+        // Not under the network lock: queued to the service thread rather than taking the
+        // lock here, so that a caller holding locks of its own cannot deadlock with a
+        // handler that takes them.
         asio::post(server_.io, [self = self(), requestId, m = std::move(message),
                                 sp = std::move(splices), k = std::move(keepAlive)]() mutable {
             NetworkLock lock(self->server_);
@@ -417,12 +407,6 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         UInt32 id = server_.newChannelId();
         channelId_.store(id, std::memory_order_release);
         return id;
-    }
-
-    void sendHere(UInt32 requestId, Buffer&& message) {
-        if (closing_ || finished_) return;
-        channel_.send(requestId, std::move(message));
-        noteClosed();
     }
 
     void sendSplicedHere(UInt32 requestId, Buffer&& message, Splices&& splices,
