@@ -15,6 +15,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "ua/types/buffer.hpp"
 #include "ua/types/builtin.hpp"
 
 namespace pnp::ua {
@@ -37,30 +38,7 @@ class DecodeError : public std::runtime_error {
     StatusCode status_;
 };
 
-// Allocator whose value-initialisation does nothing: a Buffer grown by n bytes is about to be
-// overwritten (encoding, recv), so zeroing them first only costs time (a 32 KiB payload
-// would be written twice).
-template <class T>
-struct UninitializedAllocator : std::allocator<T> {
-    using value_type = T;
-    template <class U>
-    struct rebind {
-        using other = UninitializedAllocator<U>;
-    };
-    UninitializedAllocator() = default;
-    template <class U>
-    UninitializedAllocator(const UninitializedAllocator<U>&) noexcept {}
-    template <class U>
-    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-        ::new (static_cast<void*>(p)) U;
-    }
-    template <class U, class... A>
-    void construct(U* p, A&&... args) {
-        ::new (static_cast<void*>(p)) U(std::forward<A>(args)...);
-    }
-};
-
-using Buffer = std::vector<Byte, UninitializedAllocator<Byte>>;
+static_assert(std::is_same_v<Buffer::value_type, Byte>);
 
 // Bytes an encoder referenced instead of copying them (see BinaryEncoder): they belong at
 // position `at` of the encoded Buffer, before the byte that is there. Whoever sends the
@@ -89,18 +67,13 @@ class BinaryEncoder {
 
     void raw(const void* p, std::size_t n) {
         if (n == 0) return;
-        std::size_t at = out_.size();
-        if (out_.capacity() - at < n) grow(n);
-        out_.resize(at + n);
-        std::memcpy(out_.data() + at, p, n);
+        if (out_.capacity() - out_.size() < n) reserveFor(n);
+        std::memcpy(out_.append(n), p, n);
     }
     template <class T>
     void number(T v) {
         static_assert(std::is_arithmetic_v<T>);
-        std::size_t at = out_.size();
-        if (out_.capacity() - at < sizeof(T)) grow(sizeof(T));
-        out_.resize(at + sizeof(T));
-        std::memcpy(out_.data() + at, &v, sizeof(T));
+        std::memcpy(out_.append(sizeof(T)), &v, sizeof(T));
     }
     void byte(Byte b) { out_.push_back(b); }
     // Length-prefixed bytes (String, ByteString, XmlElement).
@@ -118,7 +91,7 @@ class BinaryEncoder {
   private:
     // Room for n more bytes and what usually follows a large field (the rest of the
     // message), so a big ByteString is not copied again by the next small write.
-    void grow(std::size_t n) {
+    void reserveFor(std::size_t n) {
         out_.reserve(std::max(out_.capacity() * 2, out_.size() + n + 1024));
     }
     Buffer& out_;
