@@ -45,6 +45,7 @@
 #include <string>
 #include <string_view>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "ua/server/node.hpp"
@@ -91,17 +92,26 @@ struct MethodCallContext {
 class MethodCompletion {
   public:
     MethodCompletion() = default;
+    MethodCompletion(const MethodCompletion& other) noexcept;
+    MethodCompletion(MethodCompletion&& other) noexcept
+        : slot_(std::exchange(other.slot_, nullptr)) {}
+    MethodCompletion& operator=(MethodCompletion other) noexcept {
+        std::swap(slot_, other.slot_);
+        return *this;
+    }
+    ~MethodCompletion();
+
     void operator()(StatusCode status, std::vector<Variant> outputs = {}) const;
     void succeed(std::vector<Variant> outputs) const { (*this)(StatusCode{}, std::move(outputs)); }
     void fail(StatusCode status) const { (*this)(status); }
     bool valid() const { return slot_ != nullptr; }
 
-    struct Slot;  // implementation detail
+    struct Slot;  // implementation detail: one method of a Call request in flight
 
   private:
     friend class AddressSpace;
-    explicit MethodCompletion(std::shared_ptr<Slot> s) : slot_(std::move(s)) {}
-    std::shared_ptr<Slot> slot_;
+    explicit MethodCompletion(Slot* s) noexcept : slot_(s) {}  // takes over one reference
+    Slot* slot_ = nullptr;
 };
 
 // The general (asynchronous) form: the handler receives the checked input arguments and a

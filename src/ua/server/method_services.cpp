@@ -1,5 +1,7 @@
 // Method Service Set (OPC 10000-4 §5.11): Call with asynchronous completion.
+#include <atomic>
 #include <future>
+#include <memory>
 #include <optional>
 
 #include "ua/server/address_space_impl.hpp"
@@ -7,49 +9,91 @@
 namespace pnp::ua::server {
 
 namespace {
+class CallState;
+}
 
-// Collects the results of one Call request; completes it when the last method finished.
-struct CallState {
+// One method of a Call request in flight. `refs` counts the MethodCompletion copies; the
+// last one to go completes the method with Bad_InternalError if nobody did.
+struct MethodCompletion::Slot {
+    CallState* state = nullptr;
+    std::size_t index = 0;
+    std::atomic<std::size_t> refs{0};
+    std::atomic<bool> completed{false};
+    void release() noexcept;
+};
+
+namespace {
+
+// One Call request in flight: the response being filled in, a slot per method and `done`.
+// One allocation per request, no lock: every method writes only its own result, and the
+// completion that brings `pending` to zero (acquire-release) delivers the response.
+// `refs` keeps it alive: one for AddressSpace::call() itself, one per slot with completions.
+class CallState {
+  public:
     CallState(std::size_t n, std::function<void(CallResponse)> d)
-        : pending(n + 1), done(std::move(d)) {
+        : pending_(n + 1), done_(std::move(d)) {
         response.results.resize(n);
+        if (n > 1) moreSlots_ = std::make_unique<MethodCompletion::Slot[]>(n - 1);
+        for (std::size_t k = 0; k < n; ++k) {
+            slot(k).state = this;
+            slot(k).index = k;
+        }
     }
-    // Records a result; the last one (pending reaches 0) delivers the response.
+
+    MethodCompletion::Slot& slot(std::size_t k) { return k == 0 ? firstSlot_ : moreSlots_[k - 1]; }
+    // A method that never runs (its checks failed): only before the state is shared.
+    void skip() { pending_.fetch_sub(1, std::memory_order_relaxed); }
+    void retain() { refs_.fetch_add(1, std::memory_order_relaxed); }
+    void release() {
+        if (refs_.fetch_sub(1, std::memory_order_acq_rel) == 1) delete this;
+    }
+    // Records a method's result (each index once); the last one delivers the response.
     void complete(std::size_t index, StatusCode status, std::vector<Variant> outputs) {
-        std::unique_lock lock(mutex);
         auto& r = response.results[index];
         r.statusCode = status;
         if (status.isGood()) r.outputArguments = std::move(outputs);
-        finishOne(lock);
+        finishOne();
     }
-    void finishOne(std::unique_lock<std::mutex>& lock) {
-        if (--pending != 0) return;
-        CallResponse out = std::move(response);
-        auto callback = std::move(done);
-        lock.unlock();
-        if (callback) callback(std::move(out));
+    void finishOne() {
+        if (pending_.fetch_sub(1, std::memory_order_acq_rel) != 1) return;
+        auto done = std::move(done_);
+        if (done) done(std::move(response));
     }
 
-    std::mutex mutex;
     CallResponse response;
-    std::size_t pending;
-    std::function<void(CallResponse)> done;
+
+  private:
+    std::atomic<std::size_t> pending_;  // methods not yet completed, +1 while call() runs
+    std::atomic<std::size_t> refs_{1};
+    std::function<void(CallResponse)> done_;
+    MethodCompletion::Slot firstSlot_;
+    std::unique_ptr<MethodCompletion::Slot[]> moreSlots_;
 };
 
 }  // namespace
 
-struct MethodCompletion::Slot {
-    Slot(std::shared_ptr<CallState> s, std::size_t i) : state(std::move(s)), index(i) {}
-    ~Slot() {
-        if (!completed.exchange(true)) state->complete(index, status::BadInternalError, {});
+void MethodCompletion::Slot::release() noexcept {
+    if (refs.fetch_sub(1, std::memory_order_acq_rel) != 1) return;
+    if (!completed.exchange(true, std::memory_order_acq_rel)) {
+        try {
+            state->complete(index, status::BadInternalError, {});
+        } catch (...) {
+            // `done` threw: nothing left to tell (a destructor must not throw)
+        }
     }
-    std::shared_ptr<CallState> state;
-    std::size_t index;
-    std::atomic<bool> completed{false};
-};
+    state->release();
+}
+
+MethodCompletion::MethodCompletion(const MethodCompletion& other) noexcept : slot_(other.slot_) {
+    if (slot_ != nullptr) slot_->refs.fetch_add(1, std::memory_order_relaxed);
+}
+
+MethodCompletion::~MethodCompletion() {
+    if (slot_ != nullptr) slot_->release();
+}
 
 void MethodCompletion::operator()(StatusCode status, std::vector<Variant> outputs) const {
-    if (!slot_ || slot_->completed.exchange(true)) return;
+    if (slot_ == nullptr || slot_->completed.exchange(true, std::memory_order_acq_rel)) return;
     slot_->state->complete(slot_->index, status, std::move(outputs));
 }
 
@@ -101,7 +145,10 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
         return;
     }
     const std::size_t n = request.methodsToCall.size();
-    auto state = std::make_shared<CallState>(n, std::move(done));
+    struct Release {
+        void operator()(CallState* s) const { s->release(); }
+    };
+    std::unique_ptr<CallState, Release> state(new CallState(n, std::move(done)));
     struct Run {
         std::size_t index;
         std::shared_ptr<const MethodHandler> handler;
@@ -158,8 +205,10 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
                         if (h == nullptr) {
                             st = status::BadNotImplemented;
                         } else {
-                            Run run{k, std::move(h),
-                                    MethodCallContext{m.objectId, m.methodId, sessionId}};
+                            Run run{k, std::move(h), MethodCallContext{}};
+                            run.context.objectId = m.objectId;
+                            run.context.methodId = m.methodId;
+                            run.context.sessionId = sessionId;
                             if (!firstRun)
                                 firstRun.emplace(std::move(run));
                             else
@@ -170,24 +219,26 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
                 }
             }
             res.statusCode = st;
-            --state->pending;  // not shared with any thread yet
+            state->skip();
         }
     }
     // Handlers run without the lock; each may complete now or later, on any thread.
     auto start = [&](Run& run) {
-        auto slot = std::make_shared<MethodCompletion::Slot>(state, run.index);
-        MethodCompletion completion(slot);
+        MethodCompletion::Slot& slot = state->slot(run.index);
+        slot.refs.store(1, std::memory_order_relaxed);
+        state->retain();  // released with the slot's last completion
         try {
             (*run.handler)(run.context, std::move(request.methodsToCall[run.index].inputArguments),
-                           completion);
+                           MethodCompletion(&slot));
         } catch (...) {
-            completion(status::BadInternalError);
+            // A handler that throws fails its method now, even if it kept a completion.
+            if (!slot.completed.exchange(true, std::memory_order_acq_rel))
+                state->complete(run.index, status::BadInternalError, {});
         }
     };
     if (firstRun) start(*firstRun);
     for (auto& run : moreRuns) start(run);
-    std::unique_lock lock(state->mutex);
-    state->finishOne(lock);
+    state->finishOne();
 }
 
 CallResponse AddressSpace::callSync(const CallRequest& request, const NodeId& sessionId) {

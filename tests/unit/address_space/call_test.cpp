@@ -2,6 +2,7 @@
 // handlers.
 #include <chrono>
 #include <future>
+#include <optional>
 #include <thread>
 
 #include "test_util.hpp"
@@ -226,6 +227,39 @@ TEST_F(Call, AsynchronousCompletionFromAnotherThread) {
     EXPECT_EQ(*resp.results[1].outputArguments[0].scalar<Int32>(), 3);
     EXPECT_EQ(*resp.results[2].outputArguments[0].scalar<UInt32>(), 10u);
     EXPECT_EQ(resp.results[3].statusCode, status::BadArgumentsMissing);
+}
+
+TEST_F(Call, KeptCompletionsFailTheirMethodWhenTheLastCopyGoes) {
+    std::vector<MethodCompletion> kept;
+    NodeId keeps = space.addMethod(
+        calc, id("Calc.Keeps"), name("Keeps"), {}, {},
+        [&](const MethodCallContext&, std::vector<Variant>, MethodCompletion done) {
+            kept.push_back(done);  // two copies outlive the handler, neither is invoked
+            kept.push_back(done);
+        });
+    NodeId keepsAndThrows = space.addMethod(
+        calc, id("Calc.KeepsAndThrows"), name("KeepsAndThrows"), {}, {},
+        [&](const MethodCallContext&, std::vector<Variant>, MethodCompletion done) {
+            kept.push_back(std::move(done));
+            throw std::runtime_error("boom");  // fails the method at once despite the copy
+        });
+    CallRequest req;
+    req.methodsToCall = {request(calc, keeps, {}), request(calc, keepsAndThrows, {}),
+                         request(calc, add, {Variant(Int32{2}), Variant(Int32{3})})};
+    std::optional<CallResponse> got;
+    space.call(req, NodeId(), [&](CallResponse r) { got = std::move(r); });
+    EXPECT_FALSE(got.has_value());  // Keeps is pending while a copy of its completion lives
+    ASSERT_EQ(kept.size(), 3u);
+    kept.pop_back();  // KeepsAndThrows' copy: already completed, nothing changes
+    kept.pop_back();
+    EXPECT_FALSE(got.has_value());
+    std::thread([last = std::move(kept)]() mutable { last.clear(); }).join();
+    ASSERT_TRUE(got.has_value());
+    ASSERT_EQ(got->results.size(), 3u);
+    EXPECT_EQ(got->results[0].statusCode, status::BadInternalError);
+    EXPECT_EQ(got->results[1].statusCode, status::BadInternalError);
+    ASSERT_EQ(got->results[2].outputArguments.size(), 1u);
+    EXPECT_EQ(*got->results[2].outputArguments[0].scalar<Int32>(), 5);
 }
 
 TEST_F(Call, HandlerMayUseTheAddressSpace) {
