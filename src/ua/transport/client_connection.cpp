@@ -201,23 +201,29 @@ void ClientConnection::write(Buffer&& bytes) {
 }
 
 void ClientConnection::writeSpliced(Buffer&& bytes, const Splices& splices) {
-    std::vector<iovec> v;
-    v.reserve(2 * splices.size() + 1);
+    // Usually one spliced run: header, run, trailer.
+    constexpr std::size_t kOnStack = 8;
+    iovec onStack[kOnStack];
+    std::vector<iovec> onHeap;
+    const std::size_t most = 2 * splices.size() + 1;
+    iovec* v = onStack;
+    if (most > kOnStack) {
+        onHeap.resize(most);
+        v = onHeap.data();
+    }
+    std::size_t count = 0;
     forEachPiece(bytes, splices, 0, [&](const Byte* p, std::size_t n) {
-        v.push_back({const_cast<Byte*>(p), n});
+        v[count++] = {const_cast<Byte*>(p), n};
         return true;
     });
-    writeAll(v.data(), v.size());
+    writeAll(v, count);
     keepForReuse(std::move(bytes));
 }
 
 void ClientConnection::writeAll(iovec* iov, std::size_t count) {
     if (fd_ < 0) throw TransportError(status::BadConnectionClosed, "connection closed");
     while (count > 0) {
-        msghdr m{};
-        m.msg_iov = iov;
-        m.msg_iovlen = std::min<std::size_t>(count, IOV_MAX);
-        ssize_t n = ::sendmsg(fd_, &m, MSG_NOSIGNAL | MSG_DONTWAIT);
+        ssize_t n = sendPieces(fd_, iov, count, MSG_NOSIGNAL | MSG_DONTWAIT);
         if (n > 0) {
             iov = advanceIovecs(iov, count, static_cast<std::size_t>(n));
             continue;

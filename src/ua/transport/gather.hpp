@@ -2,8 +2,11 @@
 // Splices (the Buffer's bytes, with the referenced runs in between) as iovecs.
 #pragma once
 
+#include <sys/socket.h>
 #include <sys/uio.h>
 
+#include <algorithm>
+#include <climits>
 #include <cstddef>
 
 #include "ua/types/binary.hpp"
@@ -47,6 +50,16 @@ inline iovec* advanceIovecs(iovec* iov, std::size_t& count, std::size_t n) {
         iov->iov_len -= n;
     }
     return iov;
+}
+
+// Writes iov[0..count) with one system call. A single piece goes through send(): the kernel
+// then copies no msghdr and no iovec array in (about 0.1 us of a loopback round trip).
+inline ssize_t sendPieces(int fd, iovec* iov, std::size_t count, int flags) {
+    if (count == 1) return ::send(fd, iov->iov_base, iov->iov_len, flags);
+    msghdr m{};
+    m.msg_iov = iov;
+    m.msg_iovlen = std::min<std::size_t>(count, IOV_MAX);
+    return ::sendmsg(fd, &m, flags);
 }
 
 }  // namespace pnp::ua::transport

@@ -242,6 +242,9 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
 
     // ---- the connection's thread ----------------------------------------------------------
     void run() {
+        // request() hands this to the upper layer without a shared_from_this() per request.
+        const std::shared_ptr<ServerConnection> me = self();
+        self_ = &me;
         setReceiveTimeout(fd_, kConnectionPoll);
         std::span<Byte> space;
         {
@@ -290,6 +293,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     // leaves its bytes to it, which writes until the queue is empty. Stalled: the socket
     // took less than everything.
     WriteResult writeQueued() {
+        if (!outPending_.load(std::memory_order_acquire)) return WriteResult::Drained;
         std::unique_lock q(outMutex_);
         if (writing_) return WriteResult::Drained;
         if (broken_) return WriteResult::Error;
@@ -306,10 +310,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
                              });
             }
             q.unlock();  // others may append meanwhile; only the writer removes
-            msghdr msg{};
-            msg.msg_iov = iov;
-            msg.msg_iovlen = count;
-            ssize_t n = ::sendmsg(fd_, &msg, MSG_NOSIGNAL | MSG_DONTWAIT);
+            ssize_t n = sendPieces(fd_, iov, count, MSG_NOSIGNAL | MSG_DONTWAIT);
             int err = n < 0 ? errno : 0;
             q.lock();
             if (n < 0) {
@@ -335,6 +336,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             if (outHead_ == out_.size()) {
                 out_.clear();
                 outHead_ = 0;
+                outPending_.store(false, std::memory_order_release);
                 writing_ = false;
                 writerDone_.notify_all();
                 return WriteResult::Drained;
@@ -382,6 +384,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             queued_ += bytes.size();
             const std::size_t n = bytes.size();
             out_.push_back(Outgoing{std::move(bytes), {}, {}, n});
+            outPending_.store(true, std::memory_order_release);
         }
         markDirty();
     }
@@ -394,14 +397,13 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             const std::size_t n = bytes.size() + splicedSize(splices);
             queued_ += n;
             out_.push_back(Outgoing{std::move(bytes), std::move(splices), std::move(keepAlive), n});
+            outPending_.store(true, std::memory_order_release);
         }
         markDirty();
     }
 
-    void request(const IncomingRequest& r) override {
-        auto s = std::static_pointer_cast<ServerConnection>(self());
-        server_.handler.onRequest(s, r);
-    }
+    // Only on the connection's thread, inside run().
+    void request(const IncomingRequest& r) override { server_.handler.onRequest(*self_, r); }
 
     UInt32 newChannelId() override {
         UInt32 id = server_.newChannelId();
@@ -479,6 +481,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             outHead_ = 0;
             queued_ = 0;
             frontWritten_ = 0;
+            outPending_.store(false, std::memory_order_release);
         }
         ::close(fd_);
         fd_ = -1;
@@ -497,11 +500,15 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     std::atomic<bool> closeRequested_{false};  // close() from a thread without the lock
     bool finished_ = false;                    // under the network lock
     bool dirty_ = false;                       // in server_.dirty (network lock)
+    const std::shared_ptr<ServerConnection>* self_ = nullptr;  // run()'s, while it runs
 
     std::mutex outMutex_;  // guards the output state below
     std::condition_variable writerDone_;
     bool writing_ = false;  // a thread is writing (outside outMutex_, during sendmsg)
     bool broken_ = false;   // socket error or finished: nobody writes any more
+    // out_ has unwritten bytes (set and cleared under outMutex_; read without it so that
+    // an idle check costs no lock).
+    std::atomic<bool> outPending_{false};
     // A chunk to write: its bytes, with spliced runs held by keepAlive; size: of both.
     struct Outgoing {
         Buffer bytes;
