@@ -500,7 +500,10 @@ void Server::unregisterNodes(Ctx&, const UnregisterNodesRequest& req,
 // response is sent from whichever thread completes the last one (send() is thread-safe).
 void Server::call(const std::shared_ptr<transport::ServerConnection>& conn,
                   const transport::IncomingRequest& in) {
-    CallRequest req;
+    // Decoded into a request of this thread: its method list and authentication token keep
+    // their memory from one Call to the next (decode overwrites every field; the input
+    // arguments, the only large part, move on to the handlers).
+    thread_local CallRequest req;
     Ctx ctx{conn};
     if (!accept(conn, in, true, req, ctx)) return;
     StatusCode st = checkOperationCount(req.methodsToCall, config_.limits.maxNodesPerMethodCall);

@@ -263,7 +263,9 @@ TEST(Server, LargeByteStringsArriveIntactInOneOrManyChunks) {
         for (std::size_t i = 0; i < n; ++i) s[i] = static_cast<char>(seed + i * 7 + (i >> 9));
         return ByteString(std::move(s));
     };
-    for (std::size_t n : {4095u, 4096u, 20000u, 20001u, 65000u, 200000u, 200001u}) {
+    // Below and at the splice threshold, one chunk and several chunks.
+    for (std::size_t n : std::initializer_list<std::size_t>{
+             4096, kDefaultSpliceMin - 1, kDefaultSpliceMin, 20001, 65000, 200000, 200001}) {
         std::vector<Variant> in{
             Variant(bytes(n, 'a')), Variant(Int32(7)),
             Variant(std::vector<ByteString>{bytes(5000, 'b'), bytes(10, 'c'), bytes(n, 'd')})};

@@ -170,10 +170,12 @@ TEST(BinaryDecoding, EveryTruncationOfAValidMessageFailsCleanly) {
 // An encoder with Splices references long byte runs instead of copying them; joined back in,
 // the message is byte for byte the plain encoding.
 TEST(BinarySplices, JoinedEqualsPlainEncoding) {
+    const std::size_t k = kDefaultSpliceMin;
     std::vector<Variant> values{
-        Variant(ByteString(std::string(5000, 'x'))), Variant(Int32(3)),
-        Variant(String(std::string(4096, 's'))), Variant(ByteString(std::string(4095, 'y'))),
-        Variant(std::vector<ByteString>{ByteString(std::string(9000, 'z')), ByteString("short")})};
+        Variant(ByteString(std::string(k + 904, 'x'))), Variant(Int32(3)),
+        Variant(String(std::string(k, 's'))), Variant(ByteString(std::string(k - 1, 'y'))),
+        Variant(std::vector<ByteString>{ByteString(std::string(2 * k + 808, 'z')),
+                                        ByteString("short")})};
     Buffer plain;
     {
         BinaryEncoder e(plain);
@@ -185,7 +187,7 @@ TEST(BinarySplices, JoinedEqualsPlainEncoding) {
         BinaryEncoder e(withHoles, &splices);
         encode(e, values);
     }
-    ASSERT_EQ(splices.size(), 3u);  // 5000, 4096 and 9000 bytes; 4095 is copied
+    ASSERT_EQ(splices.size(), 3u);  // k + 904, k and 2k + 808 bytes; k - 1 is copied
     EXPECT_EQ(withHoles.size() + splicedSize(splices), plain.size());
     EXPECT_EQ(joinSplices(std::move(withHoles), splices), plain);
     // Without Splices nothing changes.
