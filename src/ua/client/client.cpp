@@ -279,16 +279,22 @@ class Client::Impl {
     // One request on the current connection, no reconnect. TransportError passes through.
     IncomingResponse exchange(Client::EncodeRef encode, Clock::time_point deadline,
                               std::string_view service, Completions& done, bool& sent) {
+        UInt32 id = sendRequest(encode, deadline);
+        sent = true;
+        return await(id, deadline, service, done);
+    }
+
+    // Encodes and sends one request on the current connection; returns its request id.
+    UInt32 sendRequest(Client::EncodeRef encode, Clock::time_point deadline) {
         // The precise time the deadline was resolved at, unless the coarse clock is later.
         Clock::time_point now = std::max(resolvedAt, transport::coarseNow());
         Buffer buffer = conn->messageBuffer();
         Splices splices;  // large byte runs stay in the request (sent before send() returns)
         encode(buffer, makeHeader(now, deadline), &splices);
         UInt32 id = conn->send(std::move(buffer), std::move(splices), deadline);
-        sent = true;
         ++stats.requestsSent;
         lastSend = now;
-        return await(id, deadline, service, done);
+        return id;
     }
 
     // A session-management request: a transport failure drops the connection.
@@ -506,13 +512,7 @@ class Client::Impl {
             checkDeadline(deadline, service);
             ensureReady(deadline, service, done);
             try {
-                Clock::time_point now = std::max(resolvedAt, transport::coarseNow());
-                Buffer buffer = conn->messageBuffer();
-                Splices splices;
-                encode(buffer, makeHeader(now, deadline), &splices);
-                UInt32 id = conn->send(std::move(buffer), std::move(splices), deadline);
-                ++stats.requestsSent;
-                lastSend = now;
+                UInt32 id = sendRequest(encode, deadline);
                 pending.insert_or_assign(id, Pending{deadline, std::move(callback), service});
                 nextAsyncDeadline = std::min(nextAsyncDeadline, deadline);
                 wake();

@@ -205,10 +205,8 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
                         if (h == nullptr) {
                             st = status::BadNotImplemented;
                         } else {
-                            Run run{k, std::move(h), MethodCallContext{}};
-                            run.context.objectId = m.objectId;
-                            run.context.methodId = m.methodId;
-                            run.context.sessionId = sessionId;
+                            Run run{k, std::move(h),
+                                    MethodCallContext{m.objectId, m.methodId, sessionId}};
                             if (!firstRun)
                                 firstRun.emplace(std::move(run));
                             else

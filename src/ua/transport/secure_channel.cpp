@@ -302,12 +302,6 @@ bool ServerChannel::sendMessage(UInt32 requestId, Buffer&& message, bool isFault
         return sendServiceFault(requestId, responseRequestHandle(message),
                                 status::BadResponseTooLarge);
     }
-    if (splices.empty()) {
-        writeSymmetricChunks(message, MessageType::Message, channelId_, sendTokenId_, requestId,
-                             sendSequence_, limits_.sendBufferSize);
-        hooks_.write(std::move(message));
-        return true;
-    }
     Splices left =
         writeSymmetricChunks(message, std::move(splices), MessageType::Message, channelId_,
                              sendTokenId_, requestId, sendSequence_, limits_.sendBufferSize);

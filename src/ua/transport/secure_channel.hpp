@@ -158,8 +158,7 @@ class ServerChannel {
         // One chunk whose spliced byte runs are written from where they are; keepAlive holds
         // them until then. By default joined and written with write().
         virtual void writeSpliced(Buffer&& bytes, Splices&& splices,
-                                  std::shared_ptr<const void> keepAlive) {
-            (void)keepAlive;
+                                  std::shared_ptr<const void> /*keepAlive*/) {
             write(joinSplices(std::move(bytes), splices));
         }
         // A complete MSG. The I/O layer hands it to the ServiceHandler. Exceptions escaping

@@ -79,8 +79,7 @@ class ServerConnection : public std::enable_shared_from_this<ServerConnection> {
     // copied): keepAlive holds the referenced bytes until they are written. The default
     // joins them into the buffer.
     virtual void sendSpliced(UInt32 requestId, Buffer&& message, Splices&& splices,
-                             std::shared_ptr<const void> keepAlive) {
-        (void)keepAlive;
+                             std::shared_ptr<const void> /*keepAlive*/) {
         send(requestId, joinSplices(std::move(message), splices));
     }
     // Sends a ServiceFault (ResponseHeader with serviceResult = status).

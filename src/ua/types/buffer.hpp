@@ -16,7 +16,6 @@
 #include <initializer_list>
 #include <iterator>
 #include <new>
-#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -93,9 +92,6 @@ class Buffer {
         size_ += n;
         return p;
     }
-    void append(const void* p, size_type n) {
-        if (n != 0) std::memcpy(append(n), p, n);
-    }
 
     void reserve(size_type n) {
         if (n > capacity_) reallocate(n);
@@ -112,20 +108,6 @@ class Buffer {
     }
     void clear() noexcept { size_ = 0; }
     void push_back(value_type v) { *append(1) = v; }
-    void pop_back() noexcept { --size_; }
-    void shrink_to_fit() {
-        if (size_ == 0) {
-            std::free(std::exchange(data_, nullptr));
-            capacity_ = 0;
-        } else if (size_ < capacity_) {
-            reallocate(size_);
-        }
-    }
-    void swap(Buffer& o) noexcept {
-        std::swap(data_, o.data_);
-        std::swap(size_, o.size_);
-        std::swap(capacity_, o.capacity_);
-    }
 
     template <class It>
     void assign(It first, It last) {
@@ -182,7 +164,5 @@ class Buffer {
     size_type size_ = 0;
     size_type capacity_ = 0;
 };
-
-inline void swap(Buffer& a, Buffer& b) noexcept { a.swap(b); }
 
 }  // namespace pnp::ua
