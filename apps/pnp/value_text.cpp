@@ -658,7 +658,7 @@ ExtensionObject extensionObjectFromJson(const json& j, const ParseOptions& opt) 
     } else {
         auto b = parseBase64(body->get<std::string>());
         if (!b) fail(bt, jsonTextForError(j), "Body is not base64");
-        x.body = std::move(b->bytes);
+        x.body = b->str();
     }
     return x;
 }
@@ -940,7 +940,7 @@ std::string scalarText(const T& v) {
     } else if constexpr (std::is_same_v<T, XmlElement>) {
         return v.xml;
     } else if constexpr (std::is_same_v<T, ByteString>) {
-        return hexText(v.bytes);
+        return hexText(v.view());
     } else if constexpr (std::is_same_v<T, LocalizedText>) {
         if (v.locale.empty()) return v.text;
         return compact(json(v.text)) + "@" + v.locale;

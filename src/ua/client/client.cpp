@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <climits>
 #include <mutex>
 #include <optional>
@@ -70,15 +71,14 @@ bool sessionGone(StatusCode s) {
 }
 
 ByteString randomNonce() {
-    ByteString n;
-    n.bytes.resize(kNonceLength);
+    std::array<Byte, kNonceLength> n{};
     std::size_t got = 0;
     while (got < kNonceLength) {
-        ssize_t r = ::getrandom(n.bytes.data() + got, kNonceLength - got, 0);
+        ssize_t r = ::getrandom(n.data() + got, kNonceLength - got, 0);
         if (r <= 0) break;
         got += static_cast<std::size_t>(r);
     }
-    return n;
+    return ByteString(n.data(), n.size());
 }
 
 UInt32 timeoutHint(Clock::time_point now, Clock::time_point deadline) {

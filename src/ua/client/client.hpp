@@ -313,7 +313,8 @@ template <class Resp>
 Resp Client::decodeIncoming(const transport::IncomingResponse& r, std::string_view service,
                             const DecodeLimits& limits) {
     if (r.status.isBad()) throw Error(r.status, std::string(service) + ": response aborted");
-    return detail::decodeResponse<Resp>(r.typeId, r.body.data(), r.body.size(), service, limits);
+    return detail::decodeResponse<Resp>(r.typeId, r.body.data(), r.body.size(), service, limits,
+                                        r.body.block());
 }
 
 template <class Req, class Resp>

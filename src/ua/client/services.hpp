@@ -184,15 +184,18 @@ inline bool isNs0Numeric(const NodeId& id, UInt32 value) {
 }
 
 // Decodes the body of a response whose encoding NodeId is typeId; a ServiceFault or a Bad
-// serviceResult throws Error.
+// serviceResult throws Error. block: where the body lies, when large ByteStrings may keep
+// references to it (BinaryDecoder::shareFrom).
 template <class Resp>
 Resp decodeResponse(const NodeId& typeId, const Byte* body, std::size_t size,
-                    std::string_view service, const DecodeLimits& limits) {
+                    std::string_view service, const DecodeLimits& limits,
+                    ByteBlock* block = nullptr) {
     if (!isNs0Numeric(typeId, DataTypeInfo<Resp>::binaryEncodingId))
         throwUnexpectedResponse(typeId, body, size, service, limits);
     Resp resp{};
     try {
         BinaryDecoder d(body, size, limits);
+        if (block != nullptr) d.shareFrom(block);
         decode(d, resp);
     } catch (const DecodeError& e) {
         throwDecodeError(e, service);

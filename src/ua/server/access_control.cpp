@@ -46,7 +46,7 @@ StatusCode DefaultAccessControl::activateSession(const ExtensionObject& token,
         if (auto user = fromExtensionObject<UserNameIdentityToken>(token)) {
             if (!user->encryptionAlgorithm.empty()) return status::BadIdentityTokenInvalid;
             auto it = users_.find(user->userName);
-            if (it == users_.end() || it->second != user->password.bytes)
+            if (it == users_.end() || it->second != user->password.view())
                 return status::BadUserAccessDenied;
             identity = SessionIdentity{false, user->userName};
             return status::Good;

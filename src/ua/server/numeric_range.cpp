@@ -21,10 +21,17 @@ struct IsVector<std::vector<T>> : std::true_type {
 template <class T>
 constexpr bool kIsByteSequence = std::is_same_v<T, String> || std::is_same_v<T, ByteString>;
 
-std::string& bytesOf(String& s) { return s; }
-std::string& bytesOf(ByteString& s) { return s.bytes; }
-const std::string& bytesOf(const String& s) { return s; }
-const std::string& bytesOf(const ByteString& s) { return s.bytes; }
+std::string_view bytesOf(const String& s) { return s; }
+std::string_view bytesOf(const ByteString& s) { return s.view(); }
+void setBytes(String& s, std::string_view v) { s.assign(v); }
+void setBytes(ByteString& s, std::string_view v) { s = ByteString(v); }
+// dst with `count` bytes at `at` replaced by src (ByteStrings are immutable: a new value).
+template <class S>
+void replaceBytes(S& dst, std::size_t at, std::size_t count, std::string_view src) {
+    std::string b(bytesOf(dst));
+    b.replace(at, count, src);
+    setBytes(dst, b);
+}
 
 bool parseIndex(std::string_view s, UInt32& out) {
     if (s.empty()) return false;
@@ -37,10 +44,10 @@ bool parseIndex(std::string_view s, UInt32& out) {
 // Substring of a byte sequence for one dimension. false: lower bound beyond the data.
 template <class S>
 bool sliceBytes(const S& in, const NumericRange::Dimension& d, S& out) {
-    const std::string& b = bytesOf(in);
+    std::string_view b = bytesOf(in);
     if (d.min >= b.size()) return false;
     std::size_t n = std::min<std::size_t>(d.count(), b.size() - d.min);
-    bytesOf(out) = b.substr(d.min, n);
+    setBytes(out, b.substr(d.min, n));
     return true;
 }
 
@@ -151,13 +158,13 @@ StatusCode writeArray(Variant& target, std::vector<T>& arr,
             if (src->size() != flats.size()) return status::BadIndexRangeNoData;
             const auto& d = range.back();
             for (std::size_t i = 0; i < flats.size(); ++i) {
-                std::string& dst = bytesOf(arr[flats[i]]);
-                const std::string& s = bytesOf((*src)[i]);
+                std::string_view dst = bytesOf(arr[flats[i]]);
+                std::string_view s = bytesOf((*src)[i]);
                 if (d.max >= dst.size() || s.size() != d.count())
                     return status::BadIndexRangeNoData;
             }
             for (std::size_t i = 0; i < flats.size(); ++i)
-                bytesOf(arr[flats[i]]).replace(d.min, d.count(), bytesOf((*src)[i]));
+                replaceBytes(arr[flats[i]], d.min, d.count(), bytesOf((*src)[i]));
             return kGood;
         }
     }
@@ -263,11 +270,11 @@ StatusCode writeRange(Variant& target, const NumericRange& range, const Variant&
         if (dims.size() != 1) return status::BadIndexRangeNoData;
         auto replace = [&](auto& dst, const auto* src) -> StatusCode {
             if (src == nullptr) return status::BadTypeMismatch;
-            std::string& d = bytesOf(dst);
-            const std::string& s = bytesOf(*src);
+            std::string_view d = bytesOf(dst);
+            std::string_view s = bytesOf(*src);
             if (dims[0].max >= d.size() || s.size() != dims[0].count())
                 return status::BadIndexRangeNoData;
-            d.replace(dims[0].min, dims[0].count(), s);
+            replaceBytes(dst, dims[0].min, dims[0].count(), s);
             return kGood;
         };
         auto& st = target.storage();

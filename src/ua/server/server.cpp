@@ -234,6 +234,7 @@ bool Server::accept(const std::shared_ptr<transport::ServerConnection>& conn,
                     const transport::IncomingRequest& in, bool needsSession, Req& req, Ctx& ctx) {
     try {
         BinaryDecoder d(in.body, in.size, config_.decodeLimits);
+        if (in.block != nullptr) d.shareFrom(in.block);
         decode(d, req);
     } catch (const DecodeError& e) {
         conn->sendServiceFault(in.requestId, 0, e.status());

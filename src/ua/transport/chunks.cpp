@@ -16,14 +16,26 @@ ChunkReader::ChunkReader(std::size_t capacity, std::size_t maxChunkSize)
 void ChunkReader::setMaxChunkSize(std::size_t n) { maxChunk_ = std::min(n, capacity_); }
 
 std::span<Byte> ChunkReader::readSpace() {
-    if (begin_ == end_) {
-        begin_ = end_ = 0;
-    } else if (begin_ > 0) {
-        std::memmove(buf_.data(), buf_.data() + begin_, end_ - begin_);
-        end_ -= begin_;
+    if (begin_ > 0) {
+        // The bytes before begin_ are about to be overwritten: values that still point
+        // into them keep this block, the reader continues in a new one.
+        const std::size_t left = end_ - begin_;
+        if (buf_->unique()) {
+            if (left != 0) std::memmove(buf_->data(), buf_->data() + begin_, left);
+        } else {
+            ByteBlockRef fresh(capacity_);
+            if (left != 0) std::memcpy(fresh->data(), buf_->data() + begin_, left);
+            buf_ = std::move(fresh);
+        }
         begin_ = 0;
+        end_ = left;
     }
-    return {buf_.data() + end_, capacity_ - end_};
+    return {buf_->data() + end_, capacity_ - end_};
+}
+
+void ChunkReader::clear() {
+    if (!buf_->unique()) buf_ = ByteBlockRef(capacity_);
+    begin_ = end_ = 0;
 }
 
 void ChunkReader::commit(std::size_t n) { end_ = std::min(end_ + n, capacity_); }
@@ -39,7 +51,7 @@ std::size_t ChunkReader::append(const Byte* p, std::size_t n) {
 std::optional<RawChunk> ChunkReader::next() {
     std::size_t avail = end_ - begin_;
     if (avail < kMessageHeaderSize) return std::nullopt;
-    const Byte* p = buf_.data() + begin_;
+    const Byte* p = buf_->data() + begin_;
     MessageHeader h = decodeMessageHeader(p);
     if (h.size > maxChunk_) {
         throw TransportError(status::BadTcpMessageTooLarge,

@@ -29,9 +29,12 @@ struct RawChunk {
 };
 
 // A linear receive buffer that frames chunks. The socket reads straight into readSpace();
-// complete chunks are handed out without copying. The buffer is allocated once, sized by
-// the configured receive buffer: a length field is checked against the negotiated maximum
-// chunk size as soon as the 8 header bytes are there, before anything else happens.
+// complete chunks are handed out without copying. The buffer is sized by the configured
+// receive buffer: a length field is checked against the negotiated maximum chunk size as
+// soon as the 8 header bytes are there, before anything else happens.
+// The buffer is a ByteBlock that values decoded from it may keep references to (large
+// ByteStrings, see BinaryDecoder::shareFrom): readSpace() reuses it only while nothing else
+// holds it, and otherwise continues in a new block.
 class ChunkReader {
   public:
     // capacity: bytes of the buffer, >= every maxChunkSize ever set.
@@ -52,10 +55,12 @@ class ChunkReader {
     std::size_t append(const Byte* p, std::size_t n);
 
     std::size_t buffered() const { return end_ - begin_; }
-    void clear() { begin_ = end_ = 0; }
+    void clear();
+    // The block the chunks handed out by next() lie in.
+    ByteBlock* block() const { return buf_.get(); }
 
   private:
-    Buffer buf_;
+    ByteBlockRef buf_;
     std::size_t capacity_;
     std::size_t maxChunk_;
     std::size_t begin_ = 0;

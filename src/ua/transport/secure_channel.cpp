@@ -174,7 +174,7 @@ void ServerChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
             handleOpen(ev.requestId, ev.body, ev.size, now);
             break;
         case MessageType::Message:
-            handleMessage(ev.requestId, ev.body, ev.size);
+            handleMessage(ev.requestId, ev.body, ev.size, ev.assembled ? nullptr : reader_.block());
             break;
         case MessageType::CloseSecureChannel:
             close();
@@ -264,13 +264,15 @@ void ServerChannel::handleOpen(UInt32 requestId, const Byte* body, std::size_t s
         makeOpenChunk(channelId_, sendSequence_.next(), requestId, out.data(), out.size()));
 }
 
-void ServerChannel::handleMessage(UInt32 requestId, const Byte* body, std::size_t size) {
+void ServerChannel::handleMessage(UInt32 requestId, const Byte* body, std::size_t size,
+                                  ByteBlock* block) {
     BinaryDecoder d(body, size);
     IncomingRequest r;
     r.requestId = requestId;
     r.typeId = decodeTypeId(d);
     r.body = d.position();
     r.size = d.remaining();
+    r.block = block;
     hooks_.request(r);
 }
 
@@ -503,7 +505,7 @@ void ClientChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
     if (ev.assembled) {
         r.body = MessageBody(std::move(assembler_.assemblyBuffer()), prefix, d.remaining());
     } else if (viewBodies_) {
-        r.body = MessageBody::viewOf(d.position(), d.remaining());
+        r.body = MessageBody::viewOf(d.position(), d.remaining(), reader_.block());
     } else {
         r.body = MessageBody(d.position(), d.remaining());
     }

@@ -21,12 +21,14 @@
 namespace pnp::ua::transport {
 
 // A request handed to the upper layer. body / size are the encoded request after its type
-// NodeId; the pointer is valid only during the call.
+// NodeId; the pointer is valid only during the call. When block is set the body lies in it
+// (the receive buffer): a decoder may keep references to it (BinaryDecoder::shareFrom).
 struct IncomingRequest {
     UInt32 requestId = 0;
     NodeId typeId;  // the binary encoding id of the request, e.g. i=631 ReadRequest
     const Byte* body = nullptr;
     std::size_t size = 0;
+    ByteBlock* block = nullptr;
 };
 
 // A response handed to the client. For a response the server aborted with an abort chunk
@@ -46,22 +48,25 @@ class MessageBody {
     MessageBody(const Byte* p, std::size_t n) : storage_(n), size_(n) {
         if (n != 0) std::memcpy(storage_.data(), p, n);
     }
-    // A view of n bytes at p (not copied).
-    static MessageBody viewOf(const Byte* p, std::size_t n) {
+    // A view of n bytes at p (not copied), which lie in `block`.
+    static MessageBody viewOf(const Byte* p, std::size_t n, ByteBlock* block) {
         MessageBody b;
         b.view_ = p;
+        b.block_ = block;
         b.size_ = n;
         return b;
     }
     MessageBody(MessageBody&& o) noexcept
         : storage_(std::move(o.storage_)),
           view_(std::exchange(o.view_, nullptr)),
+          block_(std::exchange(o.block_, nullptr)),
           offset_(std::exchange(o.offset_, 0)),
           size_(std::exchange(o.size_, 0)) {}
     MessageBody& operator=(MessageBody&& o) noexcept {
         if (this != &o) {
             storage_ = std::move(o.storage_);
             view_ = std::exchange(o.view_, nullptr);
+            block_ = std::exchange(o.block_, nullptr);
             offset_ = std::exchange(o.offset_, 0);
             size_ = std::exchange(o.size_, 0);
         }
@@ -81,6 +86,9 @@ class MessageBody {
     const Byte* end() const { return data() + size_; }
     // True while the bytes are a view of a buffer owned elsewhere.
     bool isView() const { return view_ != nullptr; }
+    // The block a view lies in (a decoder may keep references to it, see
+    // BinaryDecoder::shareFrom); null when the body owns its bytes.
+    ByteBlock* block() const { return block_; }
     // Makes the body own its bytes (copies a view; no-op otherwise).
     void own() {
         if (view_ == nullptr) return;
@@ -93,6 +101,7 @@ class MessageBody {
   private:
     Buffer storage_;
     const Byte* view_ = nullptr;
+    ByteBlock* block_ = nullptr;
     std::size_t offset_ = 0;
     std::size_t size_ = 0;
 };
@@ -224,7 +233,7 @@ class ServerChannel {
     void handleHello(const RawChunk& raw);
     void handleSecureChunk(const RawChunk& raw, TimePoint now);
     void handleOpen(UInt32 requestId, const Byte* body, std::size_t size, TimePoint now);
-    void handleMessage(UInt32 requestId, const Byte* body, std::size_t size);
+    void handleMessage(UInt32 requestId, const Byte* body, std::size_t size, ByteBlock* block);
     void checkToken(UInt32 tokenId, TimePoint now);
     void dropExpiredPrevious(TimePoint now);
 

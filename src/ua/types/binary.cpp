@@ -105,7 +105,7 @@ void encodeNodeId(BinaryEncoder& e, const NodeId& v, Byte flags) {
         case IdType::Opaque:
             e.byte(kByteString | flags);
             e.number(v.namespaceIndex());
-            e.lengthPrefixed(v.opaque().bytes);
+            e.lengthPrefixed(v.opaque().data(), v.opaque().size());
             return;
     }
 }
@@ -140,7 +140,7 @@ Byte decodeNodeId(BinaryDecoder& d, NodeId& v) {
         }
         case kByteString: {
             UInt16 ns = d.number<UInt16>();
-            d.lengthPrefixed(v.setOpaque(ns));
+            d.byteString(v.setOpaque(ns), false);  // NodeIds are kept: never share
             break;
         }
         default:

@@ -154,7 +154,31 @@ int b64Value(char c) {
 }
 }  // namespace
 
+ByteString::ByteString(const Byte* p, std::size_t n) : ByteString() {
+    if (n > static_cast<std::size_t>(INT32_MAX)) throw std::length_error("ByteString too long");
+    if (n <= kInline) {
+        if (n != 0) std::memcpy(small_, p, n);
+    } else {
+        ByteBlock* b = ByteBlock::create(n);
+        std::memcpy(b->data(), p, n);
+        heap_ = Heap{b->data(), b};
+        far_ = true;
+    }
+    size_ = static_cast<UInt32>(n);
+}
+
+void ByteString::assign(const Byte* p, std::size_t n) {
+    if (far_ && n > kInline && heap_.block->unique() && heap_.data == heap_.block->data() &&
+        heap_.block->capacity() >= n) {
+        std::memmove(heap_.block->data(), p, n);
+        size_ = static_cast<UInt32>(n);
+        return;
+    }
+    *this = ByteString(p, n);
+}
+
 std::string ByteString::toBase64() const {
+    const std::string_view bytes = view();
     std::string out;
     out.reserve((bytes.size() + 2) / 3 * 4);
     std::size_t i = 0;
@@ -182,7 +206,7 @@ std::string ByteString::toBase64() const {
 }
 
 std::optional<ByteString> ByteString::fromBase64(std::string_view s) {
-    ByteString out;
+    std::string out;
     unsigned acc = 0;
     int bits = 0;
     for (char c : s) {
@@ -193,10 +217,10 @@ std::optional<ByteString> ByteString::fromBase64(std::string_view s) {
         bits += 6;
         if (bits >= 8) {
             bits -= 8;
-            out.bytes += static_cast<char>((acc >> bits) & 0xFF);
+            out += static_cast<char>((acc >> bits) & 0xFF);
         }
     }
-    return out;
+    return ByteString(out);
 }
 
 // ---- NodeId ------------------------------------------------------------------------------
@@ -280,7 +304,7 @@ std::size_t NodeId::hash() const {
                        std::string_view(reinterpret_cast<const char*>(&guid().data1), 4)) ^
                    guid().data4[7];
         case IdType::Opaque:
-            return h ^ std::hash<std::string>()(opaque().bytes) ^ 0x55;
+            return h ^ std::hash<std::string_view>()(opaque().view()) ^ 0x55;
     }
     return h;
 }
@@ -376,7 +400,7 @@ std::string scalarToString(const ByteString& v) {
     return "0x" + [&] {
         std::string h;
         static const char* d = "0123456789abcdef";
-        for (Byte b : std::string_view(v.bytes)) {
+        for (Byte b : v) {
             h += d[b >> 4];
             h += d[b & 15];
         }

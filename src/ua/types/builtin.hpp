@@ -5,6 +5,7 @@
 #include <array>
 #include <compare>
 #include <cstdint>
+#include <cstring>
 #include <memory>
 #include <optional>
 #include <string>
@@ -14,6 +15,7 @@
 #include <variant>
 #include <vector>
 
+#include "ua/types/byte_block.hpp"
 #include "ua/types/status_code.hpp"
 
 namespace pnp::ua {
@@ -93,19 +95,101 @@ struct Guid {
 };
 
 // Distinct from String so that a Variant knows which one it holds.
-struct ByteString {
-    std::string bytes;
+// ByteString: immutable bytes with value semantics. Up to kInline bytes live in the object;
+// longer ones in a reference-counted ByteBlock, so a copy is a reference count increment and
+// a large ByteString decoded from a message can point into the receive buffer it arrived in
+// (shared(); see BinaryDecoder::shareFrom) instead of being copied out of it.
+class ByteString {
+  public:
+    static constexpr std::size_t kInline = 24;
 
-    ByteString() = default;
-    explicit ByteString(std::string b) : bytes(std::move(b)) {}
-    ByteString(const Byte* p, std::size_t n) : bytes(reinterpret_cast<const char*>(p), n) {}
-    std::size_t size() const { return bytes.size(); }
-    bool empty() const { return bytes.empty(); }
-    const Byte* data() const { return reinterpret_cast<const Byte*>(bytes.data()); }
+    ByteString() noexcept : small_{}, size_(0), far_(false) {}
+    // A copy of the bytes.
+    explicit ByteString(std::string_view b)
+        : ByteString(reinterpret_cast<const Byte*>(b.data()), b.size()) {}
+    ByteString(const Byte* p, std::size_t n);
+    // n bytes at p inside `block` (not copied; the ByteString keeps the block alive).
+    static ByteString shared(ByteBlock* block, const Byte* p, std::size_t n) noexcept {
+        ByteString s;
+        block->ref();
+        s.far_ = true;
+        s.size_ = n;
+        s.heap_.data = p;
+        s.heap_.block = block;
+        return s;
+    }
+
+    ByteString(const ByteString& o) noexcept : ByteString() { copyFrom(o); }
+    ByteString(ByteString&& o) noexcept : ByteString() { takeFrom(o); }
+    ByteString& operator=(const ByteString& o) noexcept {
+        if (this != &o) {
+            release();
+            copyFrom(o);
+        }
+        return *this;
+    }
+    ByteString& operator=(ByteString&& o) noexcept {
+        if (this != &o) {
+            release();
+            takeFrom(o);
+        }
+        return *this;
+    }
+    ~ByteString() { release(); }
+
+    std::size_t size() const noexcept { return size_; }
+    bool empty() const noexcept { return size_ == 0; }
+    const Byte* data() const noexcept { return far_ ? heap_.data : small_; }
+    const Byte* begin() const noexcept { return data(); }
+    const Byte* end() const noexcept { return data() + size_; }
+    std::string_view view() const noexcept {
+        return {reinterpret_cast<const char*>(data()), size_};
+    }
+    std::string str() const { return std::string(view()); }
+    // Replaces the value with a copy of n bytes at p. Reuses the block when this value is
+    // its only holder and it is large enough (a decoder refilling the same request object).
+    void assign(const Byte* p, std::size_t n);
+    // True when the bytes are in a block another value or a receive buffer may share.
+    bool isShared() const noexcept { return far_; }
+
     std::string toBase64() const;
     static std::optional<ByteString> fromBase64(std::string_view s);
-    auto operator<=>(const ByteString&) const = default;
+
+    friend bool operator==(const ByteString& a, const ByteString& b) noexcept {
+        return a.view() == b.view();
+    }
+    friend std::strong_ordering operator<=>(const ByteString& a, const ByteString& b) noexcept {
+        return a.view() <=> b.view();
+    }
+
+  private:
+    void release() noexcept {
+        if (far_) heap_.block->unref();
+        far_ = false;
+        size_ = 0;
+    }
+    void copyFrom(const ByteString& o) noexcept {
+        std::memcpy(static_cast<void*>(this), &o, sizeof *this);
+        if (far_) heap_.block->ref();
+    }
+    void takeFrom(ByteString& o) noexcept {
+        std::memcpy(static_cast<void*>(this), &o, sizeof *this);
+        o.far_ = false;
+        o.size_ = 0;
+    }
+
+    struct Heap {
+        const Byte* data;
+        ByteBlock* block;
+    };
+    union {
+        Byte small_[kInline];
+        Heap heap_;
+    };
+    UInt32 size_;  // a ByteString has at most Int32 max bytes (OPC 10000-6 §5.2.2.7)
+    bool far_;
 };
+static_assert(sizeof(ByteString) == 32);
 
 struct XmlElement {
     std::string xml;
@@ -132,10 +216,10 @@ class NodeId {
         if (id_.index() != 1) id_.emplace<1>();
         return std::get<1>(id_);
     }
-    std::string& setOpaque(UInt16 ns) {
+    ByteString& setOpaque(UInt16 ns) {
         ns_ = ns;
         if (id_.index() != 3) id_.emplace<3>();
-        return std::get<3>(id_).bytes;
+        return std::get<3>(id_);
     }
     IdType idType() const { return static_cast<IdType>(id_.index()); }
     bool isNull() const;

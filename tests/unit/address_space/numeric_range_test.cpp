@@ -42,8 +42,8 @@ TEST(NumericRange, ReadArrays) {
     Variant bs(
         std::vector<ByteString>{ByteString(std::string("abc")), ByteString(std::string("d"))});
     EXPECT_TRUE(readRange(bs, *NumericRange::parse("0:1,1:2"), out).isGood());
-    EXPECT_EQ((*out.array<ByteString>())[0].bytes, "bc");
-    EXPECT_EQ((*out.array<ByteString>())[1].bytes, "");  // no data in range for that element
+    EXPECT_EQ((*out.array<ByteString>())[0].view(), "bc");
+    EXPECT_EQ((*out.array<ByteString>())[1].view(), "");  // no data in range for that element
     // Three dimensions.
     std::vector<Int32> cube(24);
     for (int i = 0; i < 24; ++i) cube[i] = i;

@@ -366,7 +366,7 @@ TEST_F(Read, IndexRange) {
     EXPECT_EQ(scalarOf<String>(rd(str, "4:10")), "ef");
     EXPECT_EQ(statusOf(rd(str, "6")), status::BadIndexRangeNoData);
     NodeId bs = addVar("Bs", ns0::ByteString, Variant(ByteString(std::string("\x01\x02\x03", 3))));
-    EXPECT_EQ(scalarOf<ByteString>(rd(bs, "2")).bytes, std::string("\x03", 1));
+    EXPECT_EQ(scalarOf<ByteString>(rd(bs, "2")).view(), std::string("\x03", 1));
     // A scalar of another type has no index.
     NodeId scalar = addVar("Scalar", ns0::Int32, Variant(Int32{5}));
     EXPECT_EQ(statusOf(rd(scalar, "0")), status::BadIndexRangeNoData);

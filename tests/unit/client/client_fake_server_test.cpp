@@ -110,7 +110,7 @@ TEST_F(ClientFake, UserNameIdentity) {
     ASSERT_TRUE(u);
     EXPECT_EQ(u->policyId, FakeServer::kUserPolicy);
     EXPECT_EQ(u->userName, "operator");
-    EXPECT_EQ(u->password.bytes, "secret");
+    EXPECT_EQ(u->password.view(), "secret");
 
     Client bad;
     EXPECT_EQ(statusOf([&] {

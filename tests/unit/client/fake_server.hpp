@@ -272,7 +272,7 @@ inline void FakeServer::handleDefault(const Request& r) {
         } else if (auto u = fromExtensionObject<UserNameIdentityToken>(req.userIdentityToken)) {
             if (u->policyId != kUserPolicy)
                 s = st::BadIdentityTokenInvalid;
-            else if (u->userName != "operator" || u->password.bytes != "secret")
+            else if (u->userName != "operator" || u->password.view() != "secret")
                 s = st::BadUserAccessDenied;
         } else {
             s = st::BadIdentityTokenInvalid;
@@ -390,9 +390,9 @@ inline void FakeServer::handleDefault(const Request& r) {
             auto req = r.decodeAs<BrowseNextRequest>();
             BrowseNextResponse resp{};
             for (const auto& cp : req.continuationPoints) {
-                auto bar = cp.bytes.find('|');
-                std::size_t from = std::stoul(cp.bytes.substr(0, bar));
-                std::size_t max = std::stoul(cp.bytes.substr(bar + 1));
+                auto bar = cp.view().find('|');
+                std::size_t from = std::stoul(std::string(cp.view().substr(0, bar)));
+                std::size_t max = std::stoul(std::string(cp.view().substr(bar + 1)));
                 resp.results.push_back(req.releaseContinuationPoints ? BrowseResult{}
                                                                      : page(from, max));
             }

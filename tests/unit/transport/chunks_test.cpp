@@ -117,6 +117,61 @@ TEST(ChunkReader, ArbitrarySlices) {
     EXPECT_EQ(messages, 20);
 }
 
+// Large ByteStrings decoded as references into the receive buffer keep their bytes while the
+// reader goes on (it continues in a new block instead of overwriting them); when nothing
+// holds the buffer any more, it is reused.
+TEST(ChunkReader, DecodedValuesKeepTheBytesTheyShare) {
+    auto payload = [](int i) {
+        Buffer p = pattern(16384 + static_cast<std::size_t>(i) * 1000, static_cast<unsigned>(i));
+        return ByteString(p.data(), p.size());
+    };
+    Buffer stream;
+    SequenceGenerator seq;
+    for (int i = 0; i < 12; ++i) {
+        Buffer m = newMessageBuffer();
+        BinaryEncoder e(m);
+        encode(e, payload(i));
+        writeSymmetricChunks(m, MessageType::Message, 1, 1, static_cast<UInt32>(i + 1), seq, 65536);
+        stream.insert(stream.end(), m.begin(), m.end());
+    }
+    ChunkReader r(65536 + 4096, 65536);
+    std::vector<ByteString> kept;
+    std::mt19937 rng(3);
+    std::size_t off = 0;
+    while (off < stream.size()) {
+        std::size_t n = std::min<std::size_t>(rng() % 50000 + 1, stream.size() - off);
+        while (n > 0) {
+            std::size_t k = r.append(stream.data() + off, n);
+            off += k;
+            n -= k;
+            while (auto c = r.next()) {
+                SecureChunk sc = parseSecureChunk(*c);
+                BinaryDecoder d(sc.body, sc.bodySize);
+                d.shareFrom(r.block());
+                ByteString v;
+                decode(d, v);
+                EXPECT_TRUE(v.isShared());
+                kept.push_back(std::move(v));
+            }
+        }
+    }
+    ASSERT_EQ(kept.size(), 12u);
+    for (int i = 0; i < 12; ++i) EXPECT_EQ(kept[i], payload(i)) << i;
+
+    // Nothing else holds the current block: reading on reuses it.
+    kept.clear();
+    ByteBlock* before = r.block();
+    Buffer m = newMessageBuffer();
+    BinaryEncoder e(m);
+    encode(e, payload(0));
+    writeSymmetricChunks(m, MessageType::Message, 1, 1, 13, seq, 65536);
+    for (int round = 0; round < 3; ++round) {
+        ASSERT_EQ(r.append(m.data(), m.size()), m.size());
+        ASSERT_TRUE(r.next());
+    }
+    EXPECT_EQ(r.block(), before);
+}
+
 TEST(ChunkReader, LyingLengthRejectedFromHeader) {
     ChunkReader r(65536, 65536);
     Byte h[8];

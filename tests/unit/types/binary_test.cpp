@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 #include "ua/types/status_codes.hpp"
 
 using namespace pnp::ua;
@@ -197,4 +199,42 @@ TEST(BinarySplices, JoinedEqualsPlainEncoding) {
         encode(e, values);
     }
     EXPECT_EQ(again, plain);
+}
+
+// BinaryDecoder::shareFrom: ByteStrings of at least the minimum size point into the block
+// (values equal to a copying decode); shorter ones, Strings and opaque NodeIds are copied.
+TEST(BinaryDecoding, LargeByteStringsShareTheBlockTheyAreDecodedFrom) {
+    const std::size_t k = kDefaultShareMin;
+    std::vector<Variant> values{
+        Variant(ByteString(std::string(k, 'a'))), Variant(ByteString(std::string(k - 1, 'b'))),
+        Variant(String(std::string(k, 's'))), Variant(NodeId(2, ByteString(std::string(k, 'n')))),
+        Variant(std::vector<ByteString>{ByteString(std::string(k + 5, 'c')), ByteString("d")})};
+    Buffer b = enc(values);
+    ByteBlockRef block(b.size());
+    std::memcpy(block->data(), b.data(), b.size());
+
+    std::vector<Variant> shared;
+    {
+        BinaryDecoder d(block->data(), b.size());
+        d.shareFrom(block.get());
+        decode(d, shared);
+        EXPECT_EQ(d.remaining(), 0u);
+    }
+    EXPECT_EQ(shared, values);
+    auto inBlock = [&](const ByteString& s) {
+        return s.data() >= block->data() && s.data() + s.size() <= block->data() + b.size();
+    };
+    EXPECT_TRUE(inBlock(*shared[0].scalar<ByteString>()));
+    EXPECT_FALSE(inBlock(*shared[1].scalar<ByteString>()));
+    EXPECT_FALSE(inBlock(shared[3].scalar<NodeId>()->opaque()));
+    EXPECT_TRUE(inBlock((*shared[4].array<ByteString>())[0]));
+    EXPECT_FALSE(block->unique());
+    // The values keep the block: dropping the first reference does not free it (ASan).
+    block = ByteBlockRef();
+    EXPECT_EQ(shared[0].scalar<ByteString>()->view(), std::string(k, 'a'));
+    shared.clear();
+
+    // Without a block, nothing is shared.
+    auto plain = decodeFromBuffer<std::vector<Variant>>(b.data(), b.size());
+    EXPECT_EQ(plain, values);
 }

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 using namespace pnp::ua;
 
 TEST(NodeId, ParsesAndPrintsEveryIdType) {
@@ -59,9 +61,70 @@ TEST(ByteString, Base64) {
         ByteString b(raw);
         auto back = ByteString::fromBase64(b.toBase64());
         ASSERT_TRUE(back);
-        EXPECT_EQ(back->bytes, raw);
+        EXPECT_EQ(back->view(), raw);
     }
     EXPECT_EQ(ByteString(std::string("abc")).toBase64(), "YWJj");
+}
+
+TEST(ByteString, ValueSemanticsInlineAndInABlock) {
+    for (std::size_t n : {std::size_t{0}, std::size_t{1}, ByteString::kInline,
+                          ByteString::kInline + 1, std::size_t{100000}}) {
+        std::string raw(n, '\0');
+        for (std::size_t i = 0; i < n; ++i) raw[i] = static_cast<char>(i * 7 + 1);
+        ByteString a(raw);
+        EXPECT_EQ(a.size(), n);
+        EXPECT_EQ(a.view(), raw);
+        EXPECT_EQ(a.isShared(), n > ByteString::kInline);
+        ByteString b = a;  // a copy of a long one shares its block
+        EXPECT_EQ(b, a);
+        EXPECT_EQ(b.view(), raw);
+        if (n > ByteString::kInline) {
+            EXPECT_EQ(b.data(), a.data());
+        }
+        ByteString c = std::move(a);
+        EXPECT_TRUE(a.empty());  // NOLINT(bugprone-use-after-move): moved-from is empty
+        EXPECT_EQ(c.view(), raw);
+        a = c;
+        c = ByteString();
+        EXPECT_EQ(a.view(), raw);
+        const ByteString& same = a;
+        a = same;  // self-assignment keeps the value
+        EXPECT_EQ(a.view(), raw);
+    }
+    // Ordering is that of the bytes as unsigned values, like std::string's.
+    EXPECT_LT(ByteString(std::string("\x01")), ByteString(std::string("\xff")));
+    EXPECT_LT(ByteString(std::string("ab")), ByteString(std::string("abc")));
+    EXPECT_EQ(ByteString(std::string(40, 'x')), ByteString(std::string(40, 'x')));
+}
+
+TEST(ByteString, AssignNeverChangesAnotherValue) {
+    const std::string a(40, 'a'), b(36, 'b'), c(60, 'c');
+    ByteString x(a);
+    const Byte* block = x.data();
+    x.assign(reinterpret_cast<const Byte*>(b.data()), b.size());  // sole holder: reused
+    EXPECT_EQ(x.view(), b);
+    EXPECT_EQ(x.data(), block);
+    ByteString y = x;  // now shared: assign makes a new block
+    x.assign(reinterpret_cast<const Byte*>(a.data()), a.size());
+    EXPECT_EQ(y.view(), b);
+    EXPECT_EQ(x.view(), a);
+    x.assign(reinterpret_cast<const Byte*>(c.data()), c.size());  // larger than the block
+    EXPECT_EQ(x.view(), c);
+    x.assign(reinterpret_cast<const Byte*>("xy"), 2);
+    EXPECT_EQ(x.view(), "xy");
+    EXPECT_FALSE(x.isShared());
+}
+
+TEST(ByteString, SharedKeepsItsBlockAlive) {
+    ByteBlock* block = ByteBlock::create(64);
+    std::memset(block->data(), 'q', 64);
+    ByteString s = ByteString::shared(block, block->data() + 8, 32);
+    EXPECT_FALSE(block->unique());
+    block->unref();  // the creator lets go: s still holds it (ASan checks the reads below)
+    EXPECT_EQ(s.view(), std::string(32, 'q'));
+    ByteString t = s;
+    s = ByteString();
+    EXPECT_EQ(t.view(), std::string(32, 'q'));
 }
 
 TEST(Variant, HoldsScalarsArraysAndMatrices) {
