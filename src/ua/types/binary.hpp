@@ -158,9 +158,12 @@ class BinaryDecoder {
     }
     // The bytes being decoded lie in `block` (a receive buffer): ByteStrings of at least
     // minSize bytes become references into it (ByteString::shared) instead of copies. Each
-    // keeps the whole block alive, so minSize should be a good part of the block's size:
-    // the default, kDefaultShareMin, is a quarter of the default receive buffer.
-    void shareFrom(ByteBlock* block, std::size_t minSize = kDefaultShareMin) {
+    // keeps the whole block alive, so by default minSize is kDefaultShareMin or a fifth of
+    // the block, whichever is larger: a kept value holds at most five times its size.
+    void shareFrom(ByteBlock* block) {
+        shareFrom(block, std::max(kDefaultShareMin, block->capacity() / 5));
+    }
+    void shareFrom(ByteBlock* block, std::size_t minSize) {
         share_ = block;
         shareMin_ = minSize;
     }

@@ -216,7 +216,7 @@ TEST(BinaryDecoding, LargeByteStringsShareTheBlockTheyAreDecodedFrom) {
     std::vector<Variant> shared;
     {
         BinaryDecoder d(block->data(), b.size());
-        d.shareFrom(block.get());
+        d.shareFrom(block.get(), k);
         decode(d, shared);
         EXPECT_EQ(d.remaining(), 0u);
     }
@@ -234,6 +234,17 @@ TEST(BinaryDecoding, LargeByteStringsShareTheBlockTheyAreDecodedFrom) {
     EXPECT_EQ(shared[0].scalar<ByteString>()->view(), std::string(k, 'a'));
     shared.clear();
 
+    // By default a value must be a fifth of the block: here all of the encoded bytes.
+    {
+        ByteBlockRef big(5 * b.size());
+        std::memcpy(big->data(), b.data(), b.size());
+        BinaryDecoder d(big->data(), b.size());
+        d.shareFrom(big.get());
+        std::vector<Variant> copied;
+        decode(d, copied);
+        EXPECT_EQ(copied, values);
+        EXPECT_TRUE(big->unique());
+    }
     // Without a block, nothing is shared.
     auto plain = decodeFromBuffer<std::vector<Variant>>(b.data(), b.size());
     EXPECT_EQ(plain, values);
