@@ -54,7 +54,9 @@ TEST(Namespace0, LoadsEveryNodeOfTheNodeSet) {
         stats.bytesUsed / 1024.0);
     EXPECT_EQ(stats.nodes, nodes.size());
     EXPECT_GT(nodes.size(), 5000u);
-    EXPECT_LT(stats.namespaceZeroLoadMs, 50.0);
+    if (PNP_TIME_BUDGETS) {
+        EXPECT_LT(stats.namespaceZeroLoadMs, 50.0);
+    }
     for (const auto& n : nodes) {
         auto cls = space.nodeClass(n.id);
         ASSERT_TRUE(cls.has_value()) << n.id.toString();
