@@ -186,6 +186,13 @@ void Server::setUpServerObject() {
         lim.maxNodesPerTranslateBrowsePathsToNodeIds);
     set(ns0::Server_ServerCapabilities_OperationLimits_MaxNodesPerRegisterNodes,
         lim.maxNodesPerRegisterNodes);
+    const auto& sub = config_.subscriptionLimits;
+    set(ns0::Server_ServerCapabilities_OperationLimits_MaxMonitoredItemsPerCall,
+        sub.maxMonitoredItemsPerCall);
+    set(ns0::Server_ServerCapabilities_MaxSubscriptionsPerSession, sub.maxSubscriptionsPerSession);
+    set(ns0::Server_ServerCapabilities_MaxMonitoredItemsPerSubscription,
+        sub.maxMonitoredItemsPerSubscription);
+    set(ns0::Server_ServerCapabilities_MaxMonitoredItemsQueueSize, sub.maxQueueSize);
 }
 
 // ---- endpoints ------------------------------------------------------------------------------

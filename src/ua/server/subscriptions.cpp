@@ -5,7 +5,6 @@
 #include <cmath>
 #include <deque>
 #include <random>
-#include <set>
 #include <variant>
 
 #include "ua/types/attribute_id.hpp"
@@ -694,11 +693,9 @@ struct SubscriptionEngine::Impl {
                 ReadResponse values = as.read(read);
                 lock.lock();
                 samples += sampled.size();
-                std::set<Subscription*> touched;
+                // Queued values go out with the next publishing cycle.
                 for (std::size_t i = 0; i < sampled.size() && i < values.results.size(); ++i)
-                    if (applyValue(sampled[i], std::move(values.results[i])))
-                        touched.insert(sampled[i]->subscription);
-                (void)touched;  // reported in the next publishing cycle
+                    applyValue(sampled[i], std::move(values.results[i]));
                 sampled.clear();
                 if (stopping) break;
                 now = Clock::now();
@@ -1187,7 +1184,9 @@ void SubscriptionEngine::publish(const NodeId& session, const Connection& conn, 
         st.publishes.pop_front();
     }
     st.publishes.push_back(std::move(p));
-    for (UInt32 id : st.subscriptions) m.subscriptions[id]->lifetimeCounter = 0;
+    for (UInt32 id : st.subscriptions)
+        if (auto it = m.subscriptions.find(id); it != m.subscriptions.end())
+            it->second->lifetimeCounter = 0;
     m.serveLate(session, now);
 }
 
