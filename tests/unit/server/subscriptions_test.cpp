@@ -625,3 +625,86 @@ TEST(Events, InvalidFiltersAreRefusedWithResults) {
     EXPECT_EQ(f.monitor(sub, NodeId(0, ns0::Server), 1, 0, {}, 0, true, 12).statusCode,
               StatusCode(status::BadMonitoredItemFilterInvalid));
 }
+
+TEST(Subscriptions, LifetimeExpiresWithoutPublishRequests) {
+    Fixture f;
+    f.subscribe(10, 1);  // keep-alive 1, lifetime revised to >= 3 intervals
+    EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 1u);
+    for (int i = 0; i < 200 && f.server.subscriptions().statistics().subscriptions != 0; ++i)
+        std::this_thread::sleep_for(5ms);
+    EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 0u);
+    EXPECT_EQ(errorOf([&] { f.publish(); }), StatusCode(status::BadNoSubscription));
+}
+
+TEST(Subscriptions, PublishingDisabledSendsKeepAlivesOnly) {
+    Fixture f;
+    UInt32 sub = f.subscribe(10, 2);
+    ASSERT_TRUE(f.monitor(sub, f.dbl, 1).statusCode.isGood());
+    f.publishData();
+    SetPublishingModeRequest pm;
+    pm.publishingEnabled = false;
+    pm.subscriptionIds = {sub, sub + 77};
+    auto r = f.c.request(pm);
+    ASSERT_EQ(r.results.size(), 2u);
+    EXPECT_EQ(r.results[0], StatusCode(status::Good));
+    EXPECT_EQ(r.results[1], StatusCode(status::BadSubscriptionIdInvalid));
+    f.server.addressSpace().setValue(f.dbl, DataValue(Variant(Double{9})));
+    for (int i = 0; i < 3; ++i) EXPECT_TRUE(dataOf(f.publish()).empty());
+    pm.publishingEnabled = true;
+    pm.subscriptionIds = {sub};
+    f.c.request(pm);
+    auto d = dataOf(f.publishData());
+    ASSERT_EQ(d.size(), 1u);
+    EXPECT_EQ(doubleOf(d[0]), 9.0);
+}
+
+TEST(Subscriptions, ModifyMonitoredItemsRevisesAndAppliesTheFilter) {
+    Fixture f;
+    UInt32 sub = f.subscribe(10);
+    auto item = f.monitor(sub, f.dbl, 1, -1);  // -1: the publishing interval
+    ASSERT_TRUE(item.statusCode.isGood());
+    EXPECT_EQ(item.revisedSamplingInterval, 10);
+    f.publishData();
+    ModifyMonitoredItemsRequest mm;
+    mm.subscriptionId = sub;
+    mm.timestampsToReturn = TimestampsToReturn::Neither;
+    MonitoredItemModifyRequest m;
+    m.monitoredItemId = item.monitoredItemId;
+    m.requestedParameters.clientHandle = 5;
+    m.requestedParameters.samplingInterval = 0;
+    m.requestedParameters.queueSize = 100000;  // beyond the server's limit
+    m.requestedParameters.filter = absoluteDeadband(10);
+    mm.itemsToModify = {m, m};
+    mm.itemsToModify[1].monitoredItemId = 4242;
+    auto r = f.c.request(mm);
+    ASSERT_EQ(r.results.size(), 2u);
+    EXPECT_TRUE(r.results[0].statusCode.isGood());
+    EXPECT_EQ(r.results[0].revisedQueueSize, testConfig().subscriptionLimits.maxQueueSize);
+    EXPECT_EQ(r.results[0].revisedSamplingInterval, 0);
+    EXPECT_EQ(r.results[1].statusCode, StatusCode(status::BadMonitoredItemIdInvalid));
+    auto& as = f.server.addressSpace();
+    as.setValue(f.dbl, DataValue(Variant(Double{5})));   // within the deadband of 0
+    as.setValue(f.dbl, DataValue(Variant(Double{20})));  // beyond it
+    auto d = dataOf(f.publishData());
+    ASSERT_EQ(d.size(), 1u);
+    EXPECT_EQ(d[0].clientHandle, 5u);
+    EXPECT_EQ(doubleOf(d[0]), 20.0);
+    EXPECT_FALSE(d[0].value.sourceTimestamp.has_value());  // Neither
+    EXPECT_FALSE(d[0].value.serverTimestamp.has_value());
+}
+
+TEST(Subscriptions, PublishRequestsTimeOutByTheirHint) {
+    Fixture f;
+    f.subscribe(1000, 100);  // nothing to send for a long time
+    f.publish();             // the first keep-alive (after one interval)
+    PublishRequest p;
+    auto t0 = std::chrono::steady_clock::now();
+    // The client sends its deadline as the timeoutHint; the server answers BadTimeout.
+    EXPECT_EQ(errorOf([&] { f.c.request(p, 300ms); }), StatusCode(status::BadTimeout));
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+    // The server no longer holds it (it would otherwise wait for the next keep-alive, 100 s).
+    for (int i = 0; i < 300 && f.server.subscriptions().statistics().queuedPublishRequests != 0;
+         ++i)
+        std::this_thread::sleep_for(10ms);
+    EXPECT_EQ(f.server.subscriptions().statistics().queuedPublishRequests, 0u);
+}
