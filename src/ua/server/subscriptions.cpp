@@ -1150,6 +1150,13 @@ void SubscriptionEngine::publish(const NodeId& session, const Connection& conn, 
     Impl& m = *impl_;
     std::lock_guard lock(m.mutex);
     auto now = Clock::now();
+    // More acknowledgements than messages that can be kept are not honest ones.
+    if (req.subscriptionAcknowledgements.size() >
+        std::size_t{m.limits.maxSubscriptionsPerSession} * m.limits.maxRetransmissionQueue) {
+        conn->sendServiceFault(requestId, req.requestHeader.requestHandle,
+                               status::BadTooManyOperations);
+        return;
+    }
     auto& st = m.sessions[session];
     PendingPublish p;
     p.conn = conn;

@@ -708,3 +708,13 @@ TEST(Subscriptions, PublishRequestsTimeOutByTheirHint) {
         std::this_thread::sleep_for(10ms);
     EXPECT_EQ(f.server.subscriptions().statistics().queuedPublishRequests, 0u);
 }
+
+TEST(Subscriptions, TooManyAcknowledgementsAreRefused) {
+    Fixture f;
+    UInt32 sub = f.subscribe();
+    const auto lim = testConfig().subscriptionLimits;
+    std::vector<SubscriptionAcknowledgement> acks(
+        lim.maxSubscriptionsPerSession * lim.maxRetransmissionQueue + 1, {sub, 1});
+    EXPECT_EQ(errorOf([&] { f.publish(acks); }), StatusCode(status::BadTooManyOperations));
+    EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 1u);
+}
