@@ -79,11 +79,12 @@ int latency(server::Server& server, client::Client& c, UInt32 sub, const NodeId&
     read.nodesToRead[0].nodeId = node;
     read.nodesToRead[0].attributeId = 13;
     for (int i = 0; i < runs; ++i) {
+        // Past the publishing interval (both measured after the same pause).
+        std::this_thread::sleep_for(std::chrono::milliseconds(12));
         auto t0 = Clock::now();
         c.request(read);
         readUs.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
-        // Past the publishing interval, with a Publish request waiting in the server.
-        std::this_thread::sleep_for(std::chrono::milliseconds(12));
+        // With a Publish request waiting in the server.
         std::atomic<Clock::time_point> received{};
         std::thread publisher([&] {
             c.request(PublishRequest{}, std::chrono::seconds(5));
