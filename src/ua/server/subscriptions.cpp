@@ -442,7 +442,8 @@ struct SubscriptionEngine::Impl {
         else
             valueChanged = !(*old.value == *now.value);
         if (valueChanged) return true;
-        return item.trigger == DataChangeTrigger::StatusValueTimestamp &&
+        // With a deadband, StatusValueTimestamp behaves as StatusValue (Part 4 §7.10).
+        return item.trigger == DataChangeTrigger::StatusValueTimestamp && item.deadband < 0 &&
                old.sourceTimestamp != now.sourceTimestamp;
     }
 
@@ -962,7 +963,8 @@ struct SubscriptionEngine::Impl {
             }
         }
         if (!r) {
-            out.status = status::BadFilterNotAllowed;
+            // No EURange: PercentDeadband unsupported for it (OPC 10000-8 §7.2).
+            out.status = status::BadDeadbandFilterInvalid;
             return out;
         }
         out.deadband = f->deadbandValue / 100.0 * std::fabs(r->high - r->low);

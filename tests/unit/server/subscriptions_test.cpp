@@ -282,7 +282,10 @@ TEST(Subscriptions, AbsoluteAndPercentDeadband) {
     EXPECT_EQ(f.monitor(sub, f.text, 3, 0, absoluteDeadband(1)).statusCode,
               StatusCode(status::BadFilterNotAllowed));
     EXPECT_EQ(f.monitor(sub, f.dbl, 3, 0, absoluteDeadband(5, DeadbandType::Percent)).statusCode,
-              StatusCode(status::BadFilterNotAllowed));
+              StatusCode(status::BadDeadbandFilterInvalid));  // no EURange
+    EXPECT_EQ(
+        f.monitor(sub, f.analog, 3, 0, absoluteDeadband(101, DeadbandType::Percent)).statusCode,
+        StatusCode(status::BadDeadbandFilterInvalid));
     EXPECT_EQ(f.monitor(sub, f.dbl, 3, 0, absoluteDeadband(-1)).statusCode,
               StatusCode(status::BadDeadbandFilterInvalid));
 }
