@@ -789,7 +789,7 @@ struct SubscriptionEngine::Impl {
         bool bad = false;
         if (f->selectClauses.empty() || f->selectClauses.size() > limits.maxSelectClauses ||
             f->whereClause.elements.size() > limits.maxWhereClauseElements) {
-            out.status = status::BadEventFilterInvalid;
+            out.status = status::BadMonitoredItemFilterInvalid;
             return;
         }
         bool anyGood = false;

@@ -627,6 +627,10 @@ TEST(Events, InvalidFiltersAreRefusedWithResults) {
 
     EXPECT_EQ(f.monitor(sub, NodeId(0, ns0::Server), 1, 0, {}, 0, true, 12).statusCode,
               StatusCode(status::BadMonitoredItemFilterInvalid));
+    EXPECT_EQ(
+        f.monitor(sub, NodeId(0, ns0::Server), 1, 0, toExtensionObject(EventFilter{}), 0, true, 12)
+            .statusCode,
+        StatusCode(status::BadMonitoredItemFilterInvalid));  // nothing selected
 }
 
 TEST(Subscriptions, LifetimeExpiresWithoutPublishRequests) {
