@@ -229,6 +229,10 @@ else
         run_interop "interop node client vs pnp" "$LOGS/interop-node-vs-pnp.log" \
             bash "$ROOT/tests/interop/run_node_client_vs_pnp.sh" "$PNP_BIN" "$(free_port 48520)"
 
+        run_interop "interop node subscriber vs pnp" "$LOGS/interop-node-subscriber-vs-pnp.log" \
+            bash "$ROOT/tests/interop/run_node_client_vs_pnp.sh" "$PNP_BIN" "$(free_port 48560)" \
+            node_subscriber.js
+
         banner "tshark capture of pnp"
         if PNP_CAPTURE_DIR="$LOGS/capture" timeout -k 10 180 \
             bash "$ROOT/tests/interop/capture_tshark.sh" "$PNP_BIN" "$(free_port 48540)" \

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Run the node-opcua interop client against our server.
 #
-# usage: tests/interop/run_node_client_vs_pnp.sh PNP_BINARY PORT
+# usage: tests/interop/run_node_client_vs_pnp.sh PNP_BINARY PORT [CLIENT_SCRIPT]
+#   CLIENT_SCRIPT: the node script to run (default node_client.js; node_subscriber.js
+#   for subscriptions and events), from tests/interop.
 #   starts `PNP_BINARY ua serve --port PORT --user operator:secret` (node_client.js also
 #   opens a UserName session as operator/secret), waits (<= 10 s) for the port, runs
 #   node_client.js against opc.tcp://127.0.0.1:PORT, stops the server by PID and
@@ -18,6 +20,7 @@ if [[ $# -lt 2 ]]; then
 fi
 PNP_BINARY="$1"
 PORT="$2"
+CLIENT_SCRIPT="${3:-node_client.js}"
 if [[ ! -x "$PNP_BINARY" ]]; then
     ilog "not an executable: $PNP_BINARY"
     exit 2
@@ -59,10 +62,10 @@ if ! wait_for_port "$PORT" 10 "$SERVER_PID"; then
     exit 1
 fi
 
-timeout -k 5 70 node "$INTEROP_DIR/node_client.js" "opc.tcp://127.0.0.1:$PORT" 2>"$CLIENT_ERR"
+timeout -k 5 70 node "$INTEROP_DIR/$CLIENT_SCRIPT" "opc.tcp://127.0.0.1:$PORT" 2>"$CLIENT_ERR"
 rc=$?
 if [[ $rc -eq 124 ]]; then
-    echo "not ok - node_client.js killed after 70 s"
+    echo "not ok - $CLIENT_SCRIPT killed after 70 s"
 fi
 if ! kill -0 "$SERVER_PID" 2>/dev/null; then
     echo "not ok - pnp server still running after the client run (it exited)"

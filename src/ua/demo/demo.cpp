@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <condition_variable>
 #include <mutex>
 #include <string>
@@ -194,6 +195,7 @@ void addNodes(AddressSpace& as, UInt16 ns, std::shared_ptr<SleepWorker> worker,
               const DemoOptions& options) {
     server::ObjectAttributes objAttr;
     objAttr.description = LocalizedText("en", "pnp demo: every built-in type, Echo, Add, Sleep");
+    objAttr.eventNotifier = 1;  // SubscribeToEvents: the demo's events are fired at it
     const NodeId demo =
         as.addObject(NodeId(0, ns0::ObjectsFolder), NodeId(ns, "Demo"), QualifiedName{ns, "Demo"},
                      objAttr, NodeId(0, ns0::BaseObjectType), NodeId(0, ns0::Organizes));
@@ -276,7 +278,95 @@ UInt16 build(AddressSpace& as, const std::shared_ptr<SleepWorker>& worker,
     return ns;
 }
 
+// Fires a DemoEventType event at Demo; Sequence counts the demo's events.
+void fireDemoEvent(server::Server& server, UInt16 ns, std::atomic<UInt32>& sequence, String message,
+                   UInt16 severity) {
+    server::Event e;
+    e.eventType = NodeId(ns, "DemoEventType");
+    e.sourceNode = NodeId(ns, "Demo");
+    e.sourceName = "Demo";
+    e.message = LocalizedText("en", std::move(message));
+    e.severity = severity;
+    e.set(QualifiedName{ns, "Sequence"}, Variant(UInt32{++sequence}));
+    server.fireEvent(std::move(e));
+}
+
+// The event source and the live value (need the Server).
+void addEventNodes(server::Server& server, UInt16 ns,
+                   const std::shared_ptr<std::atomic<UInt32>>& sequence) {
+    AddressSpace& as = server.addressSpace();
+    const NodeId demo(ns, "Demo");
+    as.addReference(NodeId(0, ns0::Server), NodeId(0, ns0::HasNotifier), demo);
+
+    const NodeId type = as.addObjectType(NodeId(0, ns0::BaseEventType), NodeId(ns, "DemoEventType"),
+                                         QualifiedName{ns, "DemoEventType"});
+    server::VariableAttributes seq;
+    seq.dataType = NodeId(0, ns0::UInt32);
+    seq.value = DataValue(Variant(UInt32{0}));
+    seq.description = LocalizedText("en", "counts the demo's events (a custom event field)");
+    as.addProperty(type, NodeId(ns, "DemoEventType.Sequence"), QualifiedName{ns, "Sequence"}, seq);
+
+    server::VariableAttributes counter;
+    counter.dataType = NodeId(0, ns0::UInt32);
+    counter.value = DataValue(Variant(UInt32{0}));
+    counter.description = LocalizedText("en", "+1 every 100 ms");
+    as.addVariable(demo, NodeId(ns, "Demo.Counter"), QualifiedName{ns, "Counter"}, counter,
+                   NodeId(0, ns0::BaseDataVariableType), NodeId(0, ns0::HasComponent));
+
+    server::MethodAttributes m;
+    m.description = LocalizedText("en", "fires a DemoEventType event at Demo");
+    as.addMethod(
+        demo, NodeId(ns, "Demo.FireEvent"), QualifiedName{ns, "FireEvent"},
+        {argument("message", ns0::String), argument("severity", ns0::UInt16)}, {},
+        server::makeMethodHandler([&server, ns, sequence](const server::MethodCallContext&,
+                                                          std::vector<Variant>& in,
+                                                          std::vector<Variant>&) -> StatusCode {
+            if (in.size() != 2) return status::BadArgumentsMissing;
+            const String* text = in[0].scalar<String>();
+            const UInt16* severity = in[1].scalar<UInt16>();
+            if (text == nullptr || severity == nullptr) return status::BadTypeMismatch;
+            if (*severity < 1 || *severity > 1000) return status::BadOutOfRange;
+            fireDemoEvent(server, ns, *sequence, *text, *severity);
+            return status::Good;
+        }),
+        m);
+}
+
 }  // namespace
+
+// Demo.Counter +1 every 100 ms, a "tick" event every second (a live source for `pnp ua
+// serve`; one thread, joined by the destructor).
+class DemoTicker {
+  public:
+    DemoTicker(server::Server& server, UInt16 ns, std::shared_ptr<std::atomic<UInt32>> sequence)
+        : thread_([this, &server, ns, sequence] { run(server, ns, *sequence); }) {}
+    ~DemoTicker() {
+        {
+            std::lock_guard lock(mutex_);
+            stop_ = true;
+        }
+        wake_.notify_all();
+        thread_.join();
+    }
+
+  private:
+    void run(server::Server& server, UInt16 ns, std::atomic<UInt32>& sequence) {
+        const NodeId counter(ns, "Demo.Counter");
+        UInt32 ticks = 0;
+        std::unique_lock lock(mutex_);
+        while (!wake_.wait_for(lock, std::chrono::milliseconds(100), [this] { return stop_; })) {
+            lock.unlock();
+            server.addressSpace().setValue(counter, DataValue(Variant(++ticks)));
+            if (ticks % 10 == 0) fireDemoEvent(server, ns, sequence, "tick", 100);
+            lock.lock();
+        }
+    }
+
+    std::mutex mutex_;
+    std::condition_variable wake_;
+    bool stop_ = false;
+    std::thread thread_;  // last: starts after the members it uses
+};
 
 std::span<const BuiltinType> demoTypes() { return kTypes; }
 
@@ -312,14 +402,21 @@ Variant demoInitialArray(BuiltinType t) {
 
 // ---- DemoNamespace -----------------------------------------------------------------------
 DemoNamespace::DemoNamespace(server::Server& server, DemoOptions options)
-    : DemoNamespace(server.addressSpace(), options) {}
+    : DemoNamespace(server.addressSpace(), options) {
+    auto sequence = std::make_shared<std::atomic<UInt32>>(0);
+    addEventNodes(server, ns_, sequence);
+    ticker_ = std::make_unique<DemoTicker>(server, ns_, sequence);
+}
 
 DemoNamespace::DemoNamespace(AddressSpace& as, DemoOptions options)
     : worker_(std::make_shared<SleepWorker>(options.maxPendingSleeps)) {
     ns_ = build(as, worker_, options);
 }
 
-DemoNamespace::~DemoNamespace() { worker_->shutdown(); }
+DemoNamespace::~DemoNamespace() {
+    ticker_.reset();
+    worker_->shutdown();
+}
 
 NodeId DemoNamespace::nodeId(std::string_view stringId) const {
     return NodeId(ns_, std::string(stringId));
@@ -328,7 +425,9 @@ NodeId DemoNamespace::nodeId(std::string_view stringId) const {
 std::size_t DemoNamespace::pendingSleeps() const { return worker_->pending(); }
 
 UInt16 addDemoNamespace(server::Server& server, const DemoOptions& options) {
-    return addDemoNamespace(server.addressSpace(), options);
+    UInt16 ns = addDemoNamespace(server.addressSpace(), options);
+    addEventNodes(server, ns, std::make_shared<std::atomic<UInt32>>(0));
+    return ns;
 }
 
 UInt16 addDemoNamespace(AddressSpace& as, const DemoOptions& options) {

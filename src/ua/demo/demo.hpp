@@ -12,6 +12,13 @@
 //     s=Demo.Echo  Echo(Data: ByteString) -> (Data: ByteString)
 //     s=Demo.Add   Add(a: Int32, b: Int32) -> (sum: Int32)      (wraps around on overflow)
 //     s=Demo.Sleep Sleep(milliseconds: UInt32) -> ()
+//   With a Server (events and live values need one):
+//     Demo is an event notifier (EventNotifier SubscribeToEvents, HasNotifier from Server)
+//     s=Demo.Counter  UInt32, read-only, +1 every 100 ms (DemoNamespace only: its ticker)
+//     s=Demo.FireEvent FireEvent(message: String, severity: UInt16) -> () fires a
+//                  DemoEventType event at Demo; the ticker fires one every second too
+//     s=DemoEventType ObjectType, subtype of BaseEventType, Property Sequence (UInt32): a
+//                  custom field, counting the demo's events
 //
 // Demo.Sleep completes ASYNCHRONOUSLY: the handler returns at once and a worker thread
 // completes the call when the time is up, so a long method never blocks the server's network
@@ -56,6 +63,7 @@ Variant demoInitialScalar(BuiltinType t);
 Variant demoInitialArray(BuiltinType t);
 
 class SleepWorker;
+class DemoTicker;
 
 // Builds the demo namespace in a server's address space and owns the Sleep worker.
 // Throws server::AddressSpaceError when the demo nodes exist already.
@@ -77,6 +85,7 @@ class DemoNamespace {
   private:
     UInt16 ns_ = 0;
     std::shared_ptr<SleepWorker> worker_;
+    std::unique_ptr<DemoTicker> ticker_;  // with a Server only
 };
 
 // The same nodes, without an owner object: the Sleep worker lives as long as the method

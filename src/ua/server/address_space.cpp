@@ -779,6 +779,7 @@ StatusCode AddressSpace::setValue(const NodeId& variable, DataValue value) {
         if (c.isBad()) return c;
     }
     storeValue(*n.extra, std::move(value));
+    s.valueStored(i);
     return StatusCode{};
 }
 
@@ -801,6 +802,11 @@ void AddressSpace::setValueCallback(const NodeId& variable, ValueCallbacks callb
         n.extra->value.callbacks.reset();
     else
         n.extra->value.callbacks = std::make_shared<const ValueCallbacks>(std::move(callbacks));
+}
+
+void AddressSpace::setValueListener(ValueListener listener) {
+    auto lock = impl_->lockForChange();
+    impl_->valueListener = std::move(listener);
 }
 
 void AddressSpace::setMethodHandler(const NodeId& method, MethodHandler handler) {

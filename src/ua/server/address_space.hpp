@@ -310,6 +310,11 @@ class AddressSpace {
     // Serves the value from callbacks (replaces previous callbacks; empty to remove).
     void setValueCallback(const NodeId& variable, ValueCallbacks callbacks);
     void setMethodHandler(const NodeId& method, MethodHandler handler);
+    // Told of every stored value change (setValue, Write) - for the subscription engine.
+    // Called with the address space locked exclusively: it must be quick and must not call
+    // back into the AddressSpace. One listener; empty to remove.
+    using ValueListener = std::function<void(const NodeId& node, const DataValue& value)>;
+    void setValueListener(ValueListener listener);
 
     // ---- services ---------------------------------------------------------------------
     BrowseResponse browse(const BrowseRequest& request, ContinuationPointStore& points) const;

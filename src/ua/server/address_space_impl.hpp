@@ -23,6 +23,7 @@ inline bool isClass(const Node& n, NodeClassBits c) { return n.nodeClass == c; }
 inline NodeClass toNodeClass(NodeClassBits c) { return static_cast<NodeClass>(c); }
 
 struct AddressSpace::Impl {
+    using ValueListener = AddressSpace::ValueListener;
     explicit Impl(Options o);
 
     Options options;
@@ -69,6 +70,10 @@ struct AddressSpace::Impl {
     // Method copied from an InstanceDeclaration -> the declaration (handler fallback).
     std::unordered_map<NodeIndex, NodeIndex> methodDeclarations;
     double ns0LoadMs = 0;
+    ValueListener valueListener;  // see AddressSpace::setValueListener
+    void valueStored(NodeIndex i) const {
+        if (valueListener) valueListener(idOf(i), *nodes[i].extra->value.owned);
+    }
 
     // ---- lookups (callers hold the lock) ------------------------------------------------------
     NodeIndex find(const NodeId& id) const {

@@ -714,6 +714,7 @@ StatusCode AddressSpace::Impl::writeAttribute(std::unique_lock<std::shared_mutex
     if (!next.sourceTimestamp) next.sourceTimestamp = now;
     next.serverTimestamp = now;
     nodes[i].extra->value.owned = std::make_unique<DataValue>(std::move(next));
+    valueStored(i);
     ++changeGeneration;  // the lock may have been released for a write callback
     return kGood;
 }

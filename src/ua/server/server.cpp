@@ -40,6 +40,11 @@ StatusCode checkOperationCount(const std::vector<T>& items, UInt32 limit) {
     if (limit != 0 && items.size() > limit) return status::BadTooManyOperations;
     return status::Good;
 }
+
+template <class Req>
+std::size_t noOperations(const Req&) {
+    return 1;
+}
 }  // namespace
 
 struct Server::Session {
@@ -71,6 +76,8 @@ Server::Server(ServerConfig config) : config_(std::move(config)) {
     AddressSpace::Options options;
     options.applicationUri = config_.applicationUri;
     addressSpace_ = std::make_unique<AddressSpace>(options);
+    subscriptions_ = std::make_unique<SubscriptionEngine>(
+        *addressSpace_, config_.subscriptionLimits, config_.decodeLimits);
     config_.transport.host = config_.host;
     config_.transport.port = config_.port;
     transport_ = std::make_unique<transport::TcpServer>(
@@ -85,12 +92,16 @@ UInt16 Server::addNamespace(const std::string& uri) { return addressSpace_->addN
 
 void Server::start() {
     transport_->setTick(kSessionCheckPeriod, [this] { expireSessions(); });
+    subscriptions_->start();
     transport_->start();
 }
 
 void Server::stop() {
     if (transport_) transport_->stop();
+    if (subscriptions_) subscriptions_->stop();
 }
+
+void Server::fireEvent(Event event) { subscriptions_->fireEvent(std::move(event)); }
 
 bool Server::running() const { return transport_->running(); }
 UInt16 Server::port() const { return transport_->port(); }
@@ -175,6 +186,13 @@ void Server::setUpServerObject() {
         lim.maxNodesPerTranslateBrowsePathsToNodeIds);
     set(ns0::Server_ServerCapabilities_OperationLimits_MaxNodesPerRegisterNodes,
         lim.maxNodesPerRegisterNodes);
+    const auto& sub = config_.subscriptionLimits;
+    set(ns0::Server_ServerCapabilities_OperationLimits_MaxMonitoredItemsPerCall,
+        sub.maxMonitoredItemsPerCall);
+    set(ns0::Server_ServerCapabilities_MaxSubscriptionsPerSession, sub.maxSubscriptionsPerSession);
+    set(ns0::Server_ServerCapabilities_MaxMonitoredItemsPerSubscription,
+        sub.maxMonitoredItemsPerSubscription);
+    set(ns0::Server_ServerCapabilities_MaxMonitoredItemsQueueSize, sub.maxQueueSize);
 }
 
 // ---- endpoints ------------------------------------------------------------------------------
@@ -300,6 +318,47 @@ void Server::onRequest(const std::shared_ptr<transport::ServerConnection>& conn,
             return serve(conn, in, true, &Server::registerNodes);
         case DataTypeInfo<UnregisterNodesRequest>::binaryEncodingId:
             return serve(conn, in, true, &Server::unregisterNodes);
+        case DataTypeInfo<PublishRequest>::binaryEncodingId:
+            return publish(conn, in);
+        case DataTypeInfo<CreateSubscriptionRequest>::binaryEncodingId:
+            return serveSubscriptions(conn, in, &SubscriptionEngine::createSubscription,
+                                      noOperations<CreateSubscriptionRequest>);
+        case DataTypeInfo<ModifySubscriptionRequest>::binaryEncodingId:
+            return serveSubscriptions(conn, in, &SubscriptionEngine::modifySubscription,
+                                      noOperations<ModifySubscriptionRequest>);
+        case DataTypeInfo<DeleteSubscriptionsRequest>::binaryEncodingId:
+            return serveSubscriptions(
+                conn, in, &SubscriptionEngine::deleteSubscriptions,
+                +[](const DeleteSubscriptionsRequest& r) { return r.subscriptionIds.size(); });
+        case DataTypeInfo<SetPublishingModeRequest>::binaryEncodingId:
+            return serveSubscriptions(
+                conn, in, &SubscriptionEngine::setPublishingMode,
+                +[](const SetPublishingModeRequest& r) { return r.subscriptionIds.size(); });
+        case DataTypeInfo<RepublishRequest>::binaryEncodingId:
+            return serveSubscriptions(conn, in, &SubscriptionEngine::republish,
+                                      noOperations<RepublishRequest>);
+        case DataTypeInfo<CreateMonitoredItemsRequest>::binaryEncodingId:
+            return serveSubscriptions(
+                conn, in, &SubscriptionEngine::createMonitoredItems,
+                +[](const CreateMonitoredItemsRequest& r) { return r.itemsToCreate.size(); });
+        case DataTypeInfo<ModifyMonitoredItemsRequest>::binaryEncodingId:
+            return serveSubscriptions(
+                conn, in, &SubscriptionEngine::modifyMonitoredItems,
+                +[](const ModifyMonitoredItemsRequest& r) { return r.itemsToModify.size(); });
+        case DataTypeInfo<DeleteMonitoredItemsRequest>::binaryEncodingId:
+            return serveSubscriptions(
+                conn, in, &SubscriptionEngine::deleteMonitoredItems,
+                +[](const DeleteMonitoredItemsRequest& r) { return r.monitoredItemIds.size(); });
+        case DataTypeInfo<SetMonitoringModeRequest>::binaryEncodingId:
+            return serveSubscriptions(
+                conn, in, &SubscriptionEngine::setMonitoringMode,
+                +[](const SetMonitoringModeRequest& r) { return r.monitoredItemIds.size(); });
+        case DataTypeInfo<SetTriggeringRequest>::binaryEncodingId:
+            return serveSubscriptions(
+                conn, in, &SubscriptionEngine::setTriggering, +[](const SetTriggeringRequest& r) {
+                    // Both lists empty is nothing to do; either may be empty alone.
+                    return r.linksToAdd.size() + r.linksToRemove.size();
+                });
         case DataTypeInfo<GetEndpointsRequest>::binaryEncodingId:
             return serve(conn, in, false, &Server::getEndpoints);
         case DataTypeInfo<FindServersRequest>::binaryEncodingId:
@@ -332,7 +391,11 @@ void Server::onConnectionClosed(const std::shared_ptr<transport::ServerConnectio
 
 void Server::expireSessions() {
     auto now = transport::Clock::now();
-    std::erase_if(sessions_, [&](const auto& kv) { return kv.second->expired(now); });
+    std::erase_if(sessions_, [&](const auto& kv) {
+        if (!kv.second->expired(now)) return false;
+        subscriptions_->removeSession(kv.second->sessionId);
+        return true;
+    });
     updateSessionCount();
 }
 
@@ -411,6 +474,8 @@ void Server::closeSession(Ctx& ctx, const CloseSessionRequest& req, CloseSession
         resp.responseHeader.serviceResult = status::BadSessionIdInvalid;
         return;
     }
+    // Subscriptions end with their session (TransferSubscriptions is not supported).
+    subscriptions_->removeSession(it->second->sessionId);
     sessions_.erase(it);
     updateSessionCount();
 }
@@ -522,6 +587,44 @@ void Server::call(const std::shared_ptr<transport::ServerConnection>& conn,
     auto respond = [conn, requestId = in.requestId, handle = req.requestHeader.requestHandle](
                        CallResponse resp) { sendResponse(*conn, requestId, handle, resp); };
     addressSpace_->call(std::move(req), ctx.session->sessionId, std::move(respond));
+}
+
+// Publish is answered later, by the subscription engine (a publishing cycle, a value change
+// or an event), from whichever thread that happens on.
+void Server::publish(const std::shared_ptr<transport::ServerConnection>& conn,
+                     const transport::IncomingRequest& in) {
+    PublishRequest req;
+    Ctx ctx{conn};
+    if (!accept(conn, in, true, req, ctx)) return;
+    subscriptions_->publish(ctx.session->sessionId, conn, in.requestId, req);
+}
+
+// The other subscription services answer at once; `count` gives the operations of a request
+// (bounded by maxMonitoredItemsPerCall).
+template <class Req, class Resp>
+void Server::serveSubscriptions(const std::shared_ptr<transport::ServerConnection>& conn,
+                                const transport::IncomingRequest& in,
+                                void (SubscriptionEngine::*handler)(const NodeId&, const Req&,
+                                                                    Resp&),
+                                std::size_t (*count)(const Req&)) {
+    Req req;
+    Ctx ctx{conn};
+    if (!accept(conn, in, true, req, ctx)) return;
+    Resp resp;
+    std::size_t n = count(req);
+    if (n == 0)
+        resp.responseHeader.serviceResult = status::BadNothingToDo;
+    else if (n > config_.subscriptionLimits.maxMonitoredItemsPerCall)
+        resp.responseHeader.serviceResult = status::BadTooManyOperations;
+    else {
+        try {
+            (subscriptions_.get()->*handler)(ctx.session->sessionId, req, resp);
+        } catch (const std::exception&) {
+            resp = Resp{};
+            resp.responseHeader.serviceResult = status::BadInternalError;
+        }
+    }
+    sendResponse(*conn, in.requestId, req.requestHeader.requestHandle, resp);
 }
 
 }  // namespace pnp::ua::server

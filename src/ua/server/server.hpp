@@ -20,6 +20,7 @@
 
 #include "ua/server/access_control.hpp"
 #include "ua/server/address_space.hpp"
+#include "ua/server/subscriptions.hpp"
 #include "ua/transport/tcp_server.hpp"
 #include "ua/types/ns0_types.hpp"
 
@@ -52,6 +53,7 @@ struct ServerConfig {
 
     transport::ServerTransportConfig transport;
     OperationLimits limits;
+    SubscriptionLimits subscriptionLimits;
     DecodeLimits decodeLimits;
 
     UInt32 maxSessions = 100;
@@ -83,6 +85,11 @@ class Server : public transport::ServiceHandler {
     // Runs fn on the network thread, i.e. under the network lock (immediately if called
     // under it).
     void post(std::function<void()> fn);
+
+    // Fires an event (any thread): monitored items on its SourceNode and on every notifier
+    // above it up to the Server object receive it (see SubscriptionEngine::fireEvent).
+    void fireEvent(Event event);
+    SubscriptionEngine& subscriptions() { return *subscriptions_; }
 
     // Open sessions (any thread).
     std::size_t sessionCount() const { return sessionCount_.load(std::memory_order_relaxed); }
@@ -119,6 +126,13 @@ class Server : public transport::ServiceHandler {
     void unregisterNodes(Ctx&, const UnregisterNodesRequest&, UnregisterNodesResponse&);
     void call(const std::shared_ptr<transport::ServerConnection>& conn,
               const transport::IncomingRequest& in);
+    void publish(const std::shared_ptr<transport::ServerConnection>& conn,
+                 const transport::IncomingRequest& in);
+    template <class Req, class Resp>
+    void serveSubscriptions(const std::shared_ptr<transport::ServerConnection>& conn,
+                            const transport::IncomingRequest& in,
+                            void (SubscriptionEngine::*handler)(const NodeId&, const Req&, Resp&),
+                            std::size_t (*count)(const Req&));
 
     std::vector<EndpointDescription> endpointDescriptions(const std::string& url) const;
     ApplicationDescription applicationDescription() const;
@@ -127,6 +141,7 @@ class Server : public transport::ServiceHandler {
 
     ServerConfig config_;
     std::unique_ptr<AddressSpace> addressSpace_;
+    std::unique_ptr<SubscriptionEngine> subscriptions_;
     std::unique_ptr<transport::TcpServer> transport_;
     DateTime startTime_;
     std::unordered_map<NodeId, std::unique_ptr<Session>> sessions_;  // by authentication token

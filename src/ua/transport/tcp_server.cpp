@@ -138,6 +138,12 @@ class NetworkLock {
     explicit NetworkLock(TcpServer::Impl& s) : s_(s), lock_(s.networkMutex) {
         t_networkLockHolder = &s_;
     }
+    // Takes the lock only if it is free at once (owns() tells).
+    NetworkLock(TcpServer::Impl& s, std::try_to_lock_t)
+        : s_(s), lock_(s.networkMutex, std::try_to_lock) {
+        if (lock_.owns_lock()) t_networkLockHolder = &s_;
+    }
+    bool owns() const { return lock_.owns_lock(); }
     ~NetworkLock() { unlock(); }
     NetworkLock(const NetworkLock&) = delete;
     NetworkLock& operator=(const NetworkLock&) = delete;
@@ -187,13 +193,25 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
                             std::move(keepAlive));
             return;
         }
-        // Not under the network lock: queued to the service thread rather than taking the
-        // lock here, so that a caller holding locks of its own cannot deadlock with a
-        // handler that takes them.
+        // Not under the network lock. When it is free and nothing of this connection waits
+        // in the service thread's queue (order), written here at once: a value change on an
+        // application thread reaches the client without a thread hop. Otherwise queued to
+        // the service thread; never waiting for the lock, so that a caller holding locks of
+        // its own cannot deadlock with a handler that takes them.
+        if (postedSends_.load(std::memory_order_acquire) == 0) {
+            NetworkLock lock(server_, std::try_to_lock);
+            if (lock.owns()) {
+                sendSplicedHere(requestId, std::move(message), std::move(splices),
+                                std::move(keepAlive));
+                return;
+            }
+        }
+        postedSends_.fetch_add(1, std::memory_order_acq_rel);
         asio::post(server_.io, [self = self(), requestId, m = std::move(message),
                                 sp = std::move(splices), k = std::move(keepAlive)]() mutable {
             NetworkLock lock(self->server_);
             self->sendSplicedHere(requestId, std::move(m), std::move(sp), std::move(k));
+            self->postedSends_.fetch_sub(1, std::memory_order_acq_rel);
         });
     }
 
@@ -495,6 +513,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     bool rejected_;
     std::atomic<UInt32> channelId_{0};
     std::atomic<bool> closedFlag_{false};      // isClosed()
+    std::atomic<std::size_t> postedSends_{0};  // sends queued to the service thread
     std::atomic<bool> closing_{false};         // the channel closed: linger, then finish
     std::atomic<bool> stopRequested_{false};   // server stop: finish at once
     std::atomic<bool> closeRequested_{false};  // close() from a thread without the lock

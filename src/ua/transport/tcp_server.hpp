@@ -9,8 +9,9 @@
 // serialised by one lock, the network lock: every callback (ServiceHandler, post(),
 // setTick()) runs while its thread holds it, and "the network thread" below means "the
 // thread holding the network lock" (isNetworkThread()). ServerConnection::send() / close()
-// may be called from any thread; under the network lock they act immediately, elsewhere
-// they are posted to the service thread.
+// may be called from any thread; under the network lock they act immediately. Elsewhere
+// send() writes at once when the lock is free (a try-lock, never a wait) and nothing of the
+// connection is queued; otherwise, and for close(), they are posted to the service thread.
 //
 // Usage:
 //   class Handler : public ServiceHandler {

@@ -1,0 +1,255 @@
+#!/usr/bin/env node
+"use strict";
+// node-opcua subscriber: subscribes on a server that exposes the pnp demo namespace with
+// its live parts (Demo.Counter, Demo.FireEvent, DemoEventType with the custom field
+// Sequence; see src/ua/demo/demo.hpp) to data changes and to events, and prints one
+// TAP-like line per check (the format of node_client.js, so scripts/test.sh counts them):
+//   ok - <name> | not ok - <name>: <reason>
+// then "node_client: N passed, N failed, N skipped" (the summary scripts/test.sh reads).
+// Exit 0 only if every check passed. Bounded by PNP_CLIENT_DEADLINE_MS (default 45 s).
+//
+// usage: node tests/interop/node_subscriber.js opc.tcp://127.0.0.1:4840
+
+const stdoutWrite = process.stdout.write.bind(process.stdout);
+const out = (line) => stdoutWrite(line + "\n");
+process.stdout.write = process.stderr.write.bind(process.stderr);  // library logs -> stderr
+
+const path = require("path");
+const os = require("os");
+const {
+    OPCUAClient,
+    OPCUACertificateManager,
+    MessageSecurityMode,
+    SecurityPolicy,
+    AttributeIds,
+    DataType,
+    TimestampsToReturn,
+    ClientSubscription,
+    ClientMonitoredItem,
+    constructEventFilter,
+    DataChangeFilter,
+    DataChangeTrigger,
+    DeadbandType,
+    ContentFilterElement,
+    FilterOperator,
+    LiteralOperand,
+    Variant,
+    coerceNodeId,
+} = require("node-opcua");
+
+const url = process.argv[2];
+if (!url || !url.startsWith("opc.tcp://")) {
+    console.error("usage: node_subscriber.js opc.tcp://HOST:PORT");
+    process.exit(2);
+}
+const DEADLINE_MS = parseInt(process.env.PNP_CLIENT_DEADLINE_MS || "45000", 10);
+const STEP_TIMEOUT_MS = 10000;
+let passed = 0;
+let failed = 0;
+
+function finish(code) {
+    out(`node_client: ${passed} passed, ${failed} failed, 0 skipped`);
+    process.exit(code);
+}
+process.on("unhandledRejection", (err) => console.error("[node_subscriber] unhandled:", err && err.message));
+setTimeout(() => {
+    failed++;
+    out(`not ok - overall deadline: run exceeded ${DEADLINE_MS} ms`);
+    finish(1);
+}, DEADLINE_MS).unref();
+
+function withTimeout(promise, ms, what) {
+    let timer;
+    const t = new Promise((_, reject) => {
+        timer = setTimeout(() => reject(new Error(`timeout after ${ms} ms (${what})`)), ms);
+    });
+    return Promise.race([promise, t]).finally(() => clearTimeout(timer));
+}
+
+async function check(name, fn) {
+    try {
+        await withTimeout(Promise.resolve().then(fn), STEP_TIMEOUT_MS, name);
+        passed++;
+        out(`ok - ${name}`);
+        return true;
+    } catch (err) {
+        failed++;
+        out(`not ok - ${name}: ${String(err && err.message ? err.message : err).replace(/\s+/g, " ")}`);
+        return false;
+    }
+}
+
+function expect(cond, msg) {
+    if (!cond) throw new Error(msg);
+}
+
+// Resolves with the first `count` values the predicate accepts (bounded by the check's timeout).
+function collect(item, count, accept = () => true) {
+    return new Promise((resolve) => {
+        const got = [];
+        item.on("changed", (v) => {
+            if (got.length < count && accept(v)) got.push(v);
+            if (got.length === count) resolve(got);
+        });
+    });
+}
+
+// Waits until the server created the item; fails with its status otherwise.
+async function created(item) {
+    const status = await new Promise((resolve, reject) => {
+        item.on("initialized", () => resolve(item.statusCode));
+        item.on("err", (e) => reject(new Error(`monitored item: ${e}`)));
+    });
+    expect(status.isGood(), `CreateMonitoredItems: ${status.toString()}`);
+}
+
+async function main() {
+    const pkiRoot = process.env.PNP_NODE_PKI_DIR || path.join(os.tmpdir(), "pnp-node-opcua-pki");
+    const client = OPCUAClient.create({
+        applicationName: "pnp-interop-node-subscriber",
+        clientCertificateManager: new OPCUACertificateManager({
+            automaticallyAcceptUnknownCertificate: true,
+            rootFolder: path.join(pkiRoot, "client"),
+        }),
+        endpointMustExist: false,
+        securityMode: MessageSecurityMode.None,
+        securityPolicy: SecurityPolicy.None,
+        connectionStrategy: { maxRetry: 2, initialDelay: 250, maxDelay: 1000 },
+        requestedSessionTimeout: 30000,
+        keepSessionAlive: false,
+    });
+    let session = null;
+    let ns = -1;
+    const up = await check("connect and create a session", async () => {
+        await client.connect(url);
+        session = await client.createSession();
+        const dv = await session.read({ nodeId: "i=2255", attributeId: AttributeIds.Value });
+        ns = dv.value.value.indexOf("urn:pnp:demo");
+        expect(ns > 0, "urn:pnp:demo not in the NamespaceArray");
+    });
+    if (!up) finish(1);
+    const id = (s) => coerceNodeId(`ns=${ns};s=${s}`);
+
+    let subscription = null;
+    await check("CreateSubscription (publishing interval 50 ms)", async () => {
+        subscription = ClientSubscription.create(session, {
+            requestedPublishingInterval: 50,
+            requestedLifetimeCount: 600,
+            requestedMaxKeepAliveCount: 20,
+            maxNotificationsPerPublish: 1000,
+            publishingEnabled: true,
+            priority: 1,
+        });
+        await new Promise((resolve, reject) => {
+            subscription.on("started", resolve);
+            subscription.on("internal_error", reject);
+        });
+        expect(subscription.subscriptionId > 0, `subscriptionId ${subscription.subscriptionId}`);
+        expect(subscription.publishingInterval >= 10, `revised interval ${subscription.publishingInterval}`);
+    });
+    if (!subscription) finish(1);
+
+    await check("data changes of Demo.Counter (live, sampling interval 0)", async () => {
+        const item = ClientMonitoredItem.create(
+            subscription,
+            { nodeId: id("Demo.Counter"), attributeId: AttributeIds.Value },
+            { samplingInterval: 0, discardOldest: true, queueSize: 10 },
+            TimestampsToReturn.Both,
+        );
+        const values = (await collect(item, 4)).map((dv) => dv.value.value);
+        for (let i = 1; i < values.length; ++i)
+            expect(values[i] > values[i - 1], `not increasing: ${values.join(", ")}`);
+        await item.terminate();
+    });
+
+    await check("data change of Scalar.Double after a Write (sampling 100 ms, absolute deadband)", async () => {
+        const nodeId = id("Scalar.Double");
+        const item = ClientMonitoredItem.create(
+            subscription,
+            { nodeId, attributeId: AttributeIds.Value },
+            {
+                samplingInterval: 100,
+                queueSize: 1,
+                filter: new DataChangeFilter({
+                    trigger: DataChangeTrigger.StatusValue,
+                    deadbandType: DeadbandType.Absolute,
+                    deadbandValue: 0.5,
+                }),
+            },
+            TimestampsToReturn.Both,
+        );
+        // The initial value, 12 and 13; 12.25 is within the deadband of 12.
+        const seen = collect(item, 3);
+        await created(item);
+        for (const v of [12.0, 12.25, 13.0]) {
+            const st = await session.write({
+                nodeId, attributeId: AttributeIds.Value,
+                value: { value: new Variant({ dataType: DataType.Double, value: v }) },
+            });
+            expect(st.isGood(), `write ${v}: ${st.toString()}`);
+            await new Promise((r) => setTimeout(r, 150));
+        }
+        const values = (await seen).map((dv) => dv.value.value);
+        expect(values[1] === 12.0 && values[2] === 13.0, `values ${values.join(", ")}`);
+        await item.terminate();
+    });
+
+    await check("events of DemoEventType on the Server object: Message, Severity, custom field Sequence", async () => {
+        const ofType = new ContentFilterElement({
+            filterOperator: FilterOperator.OfType,
+            filterOperands: [
+                new LiteralOperand({ value: new Variant({ dataType: DataType.NodeId, value: id("DemoEventType") }) }),
+            ],
+        });
+        const filter = constructEventFilter(
+            ["Message", "Severity", `${ns}:Sequence`, "SourceName", "EventType"], ofType);
+        const item = ClientMonitoredItem.create(
+            subscription,
+            { nodeId: coerceNodeId("i=2253"), attributeId: AttributeIds.EventNotifier },
+            { samplingInterval: 0, queueSize: 100, filter },
+            TimestampsToReturn.Both,
+        );
+        await created(item);
+        const got = collect(item, 1, (fields) => fields[0].value && fields[0].value.text === "hello interop");
+        const result = await session.call({
+            objectId: id("Demo"),
+            methodId: id("Demo.FireEvent"),
+            inputArguments: [
+                new Variant({ dataType: DataType.String, value: "hello interop" }),
+                new Variant({ dataType: DataType.UInt16, value: 321 }),
+            ],
+        });
+        expect(result.statusCode.isGood(), `FireEvent: ${result.statusCode.toString()}`);
+        const [fields] = await got;
+        expect(fields[1].dataType === DataType.UInt16 && fields[1].value === 321, `Severity ${fields[1].toString()}`);
+        expect(fields[2].dataType === DataType.UInt32 && fields[2].value > 0, `Sequence ${fields[2].toString()}`);
+        expect(fields[3].value === "Demo", `SourceName ${fields[3].toString()}`);
+        expect(fields[4].value.toString() === id("DemoEventType").toString(), `EventType ${fields[4].toString()}`);
+        await item.terminate();
+    });
+
+    await check("events on the Demo notifier (the demo's tick events reach it)", async () => {
+        const item = ClientMonitoredItem.create(
+            subscription,
+            { nodeId: id("Demo"), attributeId: AttributeIds.EventNotifier },
+            { samplingInterval: 0, queueSize: 100, filter: constructEventFilter(["Message", `${ns}:Sequence`]) },
+            TimestampsToReturn.Both,
+        );
+        const [fields] = await collect(item, 1, (f) => f[0].value && f[0].value.text === "tick");
+        expect(fields[1].value > 0, `Sequence ${fields[1].toString()}`);
+        await item.terminate();
+    });
+
+    await check("DeleteSubscriptions and close the session", async () => {
+        await subscription.terminate();
+        await session.close();
+        await client.disconnect();
+    });
+    finish(failed === 0 ? 0 : 1);
+}
+
+main().catch((err) => {
+    failed++;
+    out(`not ok - unexpected error: ${String(err && err.stack ? err.stack : err).replace(/\s+/g, " ")}`);
+    finish(1);
+});
