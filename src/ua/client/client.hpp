@@ -104,6 +104,8 @@ struct BrowseOptions {
     UInt32 maxReferencesPerNode = 0;  // per Browse/BrowseNext; 0: the server's choice
 };
 
+class SubscriptionEngine;
+
 struct ClientStats {
     std::uint64_t requestsSent = 0;
     std::uint64_t timeouts = 0;            // calls that ran past their deadline
@@ -254,6 +256,10 @@ class Client {
     void startBackgroundThread();
     void stopBackgroundThread();
     bool backgroundThreadRunning() const;
+
+    // The Publish loop of this client's subscriptions (subscription.hpp), created on first
+    // use.
+    std::shared_ptr<SubscriptionEngine> subscriptionEngine();
 
     class Impl;
 
