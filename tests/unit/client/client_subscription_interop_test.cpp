@@ -6,6 +6,7 @@
 #include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
+#include <sys/time.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -118,6 +119,11 @@ class Relay {
                 a.sin_family = AF_INET;
                 a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
                 a.sin_port = htons(target_);
+                // A peer that stops reading must not stall the relay (and the test) forever.
+                timeval sendTimeout{1, 0};
+                for (int fd : {c, s})
+                    if (fd >= 0)
+                        ::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &sendTimeout, sizeof sendTimeout);
                 if (c >= 0 && ::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) {
                     pairs_.emplace_back(c, s);
                 } else {
@@ -163,6 +169,7 @@ struct Recorder {
     std::vector<DataValue> values;
     std::vector<std::vector<Variant>> events;
     std::vector<SubscriptionStatus::Kind> statuses;
+    std::string log;  // the statuses, for failure messages
 
     template <class Pred>
     bool waitFor(std::chrono::milliseconds timeout, Pred pred) {
@@ -176,7 +183,10 @@ struct Recorder {
     }
     void status(const SubscriptionStatus& s) {
         std::lock_guard lock(m);
-        if (s.kind != SubscriptionStatus::Kind::KeepAlive) statuses.push_back(s.kind);
+        if (s.kind == SubscriptionStatus::Kind::KeepAlive) return;
+        statuses.push_back(s.kind);
+        log += std::to_string(static_cast<int>(s.kind)) + " " + s.status.toString() + " " +
+               s.message + "\n";
         cv.notify_all();
     }
     std::size_t valueCount() {
@@ -351,7 +361,8 @@ TEST_F(SubscriptionInterop, SurvivesAServerRestartByRecreating) {
                                 return r.sawStatus(SubscriptionStatus::Kind::Recreated) &&
                                        r.values.size() >= before + 3;
                             }))
-        << "statuses: " << rec.statuses.size() << ", values: " << rec.valueCount() - before;
+        << "statuses:\n"
+        << rec.log << "values: " << rec.valueCount() - before;
     EXPECT_NE(sub.id(), 0u);
     (void)oldId;  // a new server may hand out the same id again
     EXPECT_FALSE(rec.sawStatus(SubscriptionStatus::Kind::Lost));
@@ -382,7 +393,11 @@ TEST_F(SubscriptionInterop, SurvivesADroppedConnectionWithTheSameSession) {
                                 return r.sawStatus(SubscriptionStatus::Kind::Republished) &&
                                        r.values.size() >= before + 5;
                             }))
-        << "statuses: " << rec.statuses.size() << ", values: " << rec.valueCount() - before;
+        << "statuses:\n"
+        << rec.log << "values: " << rec.valueCount() - before
+        << ", reconnects: " << client.stats().reconnects
+        << ", connections lost: " << client.stats().connectionsLost
+        << ", publish responses: " << client.subscriptionEngine()->stats().publishResponses;
     EXPECT_EQ(client.sessionId(), session);
     EXPECT_EQ(sub.id(), id);  // the same subscription on the server
     // No change was lost: the queue (100) and republishing cover the gap. (node-opcua
