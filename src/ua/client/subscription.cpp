@@ -206,7 +206,10 @@ void SubscriptionEngine::onPublish(Result<PublishResponse> r, std::uint64_t gen)
         if (!r.ok()) {
             StatusCode s = r.status();
             if (s.code() == status::BadTimeout.code()) {
-                refill = true;  // nothing to publish for a long time; ask again
+                // Not even a keep-alive for twice the keep-alive period: tell the user (the
+                // server may be hung) and ask again.
+                refill = true;
+                for (const auto& [id, x] : subs_) errorTargets.push_back(x);
             } else if (s.code() == status::BadTooManyPublishRequests.code()) {
                 maxOutstanding_ = std::max<UInt32>(1, outstanding_);
             } else if (s.code() == status::BadNoSubscription.code() || waitsForReconnect(s)) {

@@ -63,7 +63,8 @@ struct SubscriptionStatus {
         Transferred,    // moved to the new session with TransferSubscriptions
         Recreated,      // created again (with its items) on a new session
         Lost,           // gone and could not be recreated; the handle is dead
-        PublishError,   // a Publish failed (status says why); publishing continues
+        PublishError,   // a Publish failed (status says why; BadTimeout: no keep-alive in
+                        // twice the keep-alive period); publishing continues
     };
     Kind kind;
     StatusCode status;
