@@ -198,11 +198,13 @@ void SubscriptionEngine::onPublish(Result<PublishResponse> r, std::uint64_t gen)
     bool refill = false;
     bool keepAlive = false;
     UInt32 gapFrom = 0, gapTo = 0;
+    bool serverHasAnother = false;
     std::vector<std::shared_ptr<SubscriptionState>> errorTargets;
     {
         std::lock_guard lock(mutex_);
         if (gen != generation_) return;  // sent on a session that has been replaced
         if (outstanding_ > 0) --outstanding_;
+        serverHasAnother = outstanding_ > 0;
         if (!r.ok()) {
             StatusCode s = r.status();
             if (s.code() == status::BadTimeout.code()) {
@@ -243,17 +245,20 @@ void SubscriptionEngine::onPublish(Result<PublishResponse> r, std::uint64_t gen)
             refill = true;
         }
     }
-    // The next Publish goes out before the callbacks run: the server always has one.
-    if (refill) fill();
+    // The server must always hold a Publish. If it still has one, the callbacks run first
+    // (the send would delay them: latency); otherwise the next Publish goes out first.
+    if (refill && !serverHasAnother) fill();
     for (const auto& s : errorTargets)
         report(s, SubscriptionStatus::Kind::PublishError, r.status(),
                r.error() ? r.error()->what() : "");
-    if (!r.ok() || !sub) return;
-    if (keepAlive)
-        report(sub, SubscriptionStatus::Kind::KeepAlive, StatusCode{}, {});
-    else
-        dispatch(sub, r.value().notificationMessage);
-    if (gapTo >= gapFrom && gapFrom != 0) republish(sub, gapFrom, gapTo);
+    if (r.ok() && sub) {
+        if (keepAlive)
+            report(sub, SubscriptionStatus::Kind::KeepAlive, StatusCode{}, {});
+        else
+            dispatch(sub, r.value().notificationMessage);
+    }
+    if (refill && serverHasAnother) fill();
+    if (sub && gapTo >= gapFrom && gapFrom != 0) republish(sub, gapFrom, gapTo);
 }
 
 void SubscriptionEngine::report(const std::shared_ptr<SubscriptionState>& sub,

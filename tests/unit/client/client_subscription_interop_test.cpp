@@ -112,6 +112,7 @@ class Relay {
                 fds.push_back({b, POLLIN, 0});
             }
             if (::poll(fds.data(), fds.size(), 20) <= 0) continue;
+            const std::size_t polled = pairs_.size();  // a pair accepted below is not in fds
             if (fds[0].revents & POLLIN) {
                 int c = ::accept4(listen_, nullptr, nullptr, SOCK_CLOEXEC);
                 int s = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
@@ -131,7 +132,7 @@ class Relay {
                     ::close(s);
                 }
             }
-            for (std::size_t i = 0; i < pairs_.size(); ++i) {
+            for (std::size_t i = 0; i < polled; ++i) {
                 bool dead = false;
                 for (int side = 0; side < 2 && !dead; ++side) {
                     const pollfd& p = fds[1 + 2 * i + side];
