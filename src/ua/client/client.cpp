@@ -604,7 +604,7 @@ class Client::Impl {
                 }
             }
         }
-        if (wantConnected && !conn && config.reconnect.enabled)
+        if (wantConnected && (!conn || sessionInvalid) && config.reconnect.enabled)
             next = std::min(next, std::max(now, nextReconnect));
         return std::min(next, nextAsyncDeadline);
     }

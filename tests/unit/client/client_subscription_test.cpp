@@ -67,6 +67,16 @@ class Scripted {
         std::lock_guard lock(m_);
         return deletedSubscriptions_;
     }
+    // The result of TransferSubscriptions for every subscription.
+    void setTransferResult(StatusCode s) {
+        std::lock_guard lock(m_);
+        transferResult_ = s;
+    }
+    // The client handles of every CreateMonitoredItems request, in order.
+    std::vector<std::vector<UInt32>> createdHandles() {
+        std::lock_guard lock(m_);
+        return createdHandles_;
+    }
 
   private:
     bool handle(const FakeServer::Request& r) {
@@ -80,6 +90,12 @@ class Scripted {
             FakeServer::respond(r, std::move(resp));
         } else if (r.is<CreateMonitoredItemsRequest>()) {
             auto req = r.decodeAs<CreateMonitoredItemsRequest>();
+            {
+                std::lock_guard lock(m_);
+                createdHandles_.emplace_back();
+                for (const auto& item : req.itemsToCreate)
+                    createdHandles_.back().push_back(item.requestedParameters.clientHandle);
+            }
             CreateMonitoredItemsResponse resp{};
             for (const auto& item : req.itemsToCreate) {
                 MonitoredItemCreateResult res{};
@@ -127,6 +143,13 @@ class Scripted {
                 resp.notificationMessage = std::move(*m);
                 FakeServer::respond(r, std::move(resp));
             }
+        } else if (r.is<TransferSubscriptionsRequest>()) {
+            auto req = r.decodeAs<TransferSubscriptionsRequest>();
+            TransferSubscriptionsResponse resp{};
+            std::lock_guard lock(m_);
+            for (std::size_t i = 0; i < req.subscriptionIds.size(); ++i)
+                resp.results.push_back({transferResult_, {}});
+            FakeServer::respond(r, std::move(resp));
         } else if (r.is<PublishRequest>()) {
             std::lock_guard lock(m_);
             publishes_.push_back(r);
@@ -145,6 +168,8 @@ class Scripted {
     std::vector<UInt32> republished_;
     std::vector<UInt32> deletedItems_;
     std::vector<UInt32> deletedSubscriptions_;
+    StatusCode transferResult_;
+    std::vector<std::vector<UInt32>> createdHandles_;
 };
 
 NotificationMessage dataMessage(UInt32 seq, std::vector<std::pair<UInt32, Int32>> values) {
@@ -349,6 +374,57 @@ TEST_F(ClientSubscription, StatusChangeReportsAndHandlesDeleteOnDestruction) {
     { Subscription sub(client); }
     EXPECT_EQ(script.deletedSubscriptions(), (std::vector<UInt32>{kSubscriptionId}));
 }
+
+// The server forgets the session (a Publish answers BadSessionIdInvalid): the client
+// creates a new one and moves the subscription over, or recreates it with its items.
+class ClientSubscriptionSessionLoss : public ClientSubscription,
+                                      public ::testing::WithParamInterface<bool> {};
+
+TEST_P(ClientSubscriptionSessionLoss, TransferredOrRecreated) {
+    const bool transferable = GetParam();
+    script.setTransferResult(transferable ? StatusCode{} : status::BadSubscriptionIdInvalid);
+    std::mutex m;
+    std::vector<SubscriptionStatus::Kind> kinds;
+    Values values;
+    Subscription sub(client, {}, [&](const SubscriptionStatus& s) {
+        std::lock_guard lock(m);
+        if (s.kind != SubscriptionStatus::Kind::KeepAlive) kinds.push_back(s.kind);
+    });
+    MonitoredItem item =
+        sub.monitorValue(NodeId(1, "Int32"), [&](const DataValue& v) { values.add(v); });
+    const UInt32 handle = item.clientHandle();
+    client.startBackgroundThread();
+    NodeId oldSession = client.sessionId();
+
+    server.forgetSessions();
+    auto p = script.nextPublish();
+    ASSERT_TRUE(p);
+    FakeServer::fault(*p, status::BadSessionIdInvalid);
+    const auto expected =
+        transferable ? SubscriptionStatus::Kind::Transferred : SubscriptionStatus::Kind::Recreated;
+    ASSERT_TRUE(waitUntil([&] {
+        std::lock_guard lock(m);
+        return std::find(kinds.begin(), kinds.end(), expected) != kinds.end();
+    }));
+    EXPECT_NE(client.sessionId(), oldSession);
+    auto created = script.createdHandles();
+    if (transferable) {
+        EXPECT_EQ(created.size(), 1u);  // nothing created again
+    } else {
+        ASSERT_EQ(created.size(), 2u);  // the item again, with the same client handle
+        EXPECT_EQ(created.back(), (std::vector<UInt32>{handle}));
+    }
+    // Notifications keep reaching the same callback (skip Publish requests of the old session).
+    for (int i = 0; i < 4 && values.snapshot().empty(); ++i) {
+        p = script.nextPublish();
+        ASSERT_TRUE(p);
+        answer(*p, dataMessage(1, {{handle, 99}}));
+        waitUntil([&] { return !values.snapshot().empty(); }, 300ms);
+    }
+    ASSERT_EQ(values.snapshot(), (std::vector<Int32>{99}));
+}
+
+INSTANTIATE_TEST_SUITE_P(Both, ClientSubscriptionSessionLoss, ::testing::Bool());
 
 }  // namespace
 }  // namespace pnp::ua::client
