@@ -59,6 +59,9 @@
 // stopped and joined by stopBackgroundThread() and by the destructor. runIterate() does the
 // same work on the calling thread.
 //
+// Subscriptions: see subscription.hpp (Subscription, MonitoredItem); their Publish requests
+// are async requests of this client and complete on the threads named above.
+//
 // Performance. A blocking call is: encode into the transport buffer, one send, poll/recv on
 // the calling thread, decode; no thread hop. connect() costs TCP + HEL/ACK +
 // OpenSecureChannel + CreateSession + ActivateSession and nothing else (no NamespaceArray or

@@ -5,19 +5,21 @@
 //       [](const DataValue& v) { ... });
 //   MonitoredItem alarms = sub.monitorEvents(NodeId(0, ns0::Server),
 //       {.select = {"Message", "Severity", "2:CustomField"}},
-//       [](const EventFields& e) { auto* sev = e.get("Severity"); ... });
+//       [](EventFields& e) { const Variant* severity = e.get("Severity"); ... });
 //   client.startBackgroundThread();   // or call client.runIterate() in your own loop
 //
 // Handles are RAII: destroying a MonitoredItem deletes it on the server, destroying a
-// Subscription deletes the subscription (errors are swallowed; remove() throws them). Both
-// must not outlive the Client, and the Client must not be moved while they exist.
+// Subscription deletes the subscription (errors are swallowed; remove() throws them). The
+// Client may be moved while they exist; once it is destroyed they are inert. Callbacks must
+// not throw (exceptions are swallowed); they may call the client and remove their own item.
 //
 // Publishing. The client keeps a few Publish requests outstanding per session (one more
 // than the number of subscriptions, at most 4; fewer after BadTooManyPublishRequests),
 // acknowledges every NotificationMessage with the next Publish, republishes missing
-// sequence numbers and sends a new Publish when one times out. Responses are dispatched like every
-// async completion (runIterate(), the background thread, or inside a blocking call) and the
-// callbacks run on that thread without the client's lock: they may call the client.
+// sequence numbers and sends a new Publish when one times out. Responses are dispatched like
+// every async completion (runIterate(), the background thread, or inside a blocking call)
+// and the callbacks run on that thread without the client's lock. Republished messages may
+// arrive after newer ones (DataValue timestamps tell the order).
 //
 // Reconnect. When the client re-activates its session on a new channel, the messages
 // missed meanwhile are republished; when it had to create a new session, the subscriptions
