@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Full test run (this is what CI runs through .ci/run):
 #   1. scripts/setup.sh                      (packages + npm ci)
-#   2. release build  + ctest (build/)
+#   2. release build  + ctest (build/); the ctest entries test_ua_client_interop and
+#      test_ua_client_subscription_interop run our client against node-opcua servers
 #   3. asan build     + ctest (build-asan/, g++, labels bench|fuzz excluded)
 #   4. fuzz build (build-fuzz/, clang-19, only the fuzz/ targets), then every libFuzzer
 #      target found there for PNP_FUZZ_SECONDS each (default 60)

@@ -1,6 +1,8 @@
-// The client subcommands of `pnp ua`: endpoints, browse, read, write, call.
+// The client subcommands of `pnp ua`: endpoints, browse, read, write, call, monitor, events.
 #include <algorithm>
+#include <atomic>
 #include <cctype>
+#include <csignal>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -12,6 +14,7 @@
 #include "output.hpp"
 #include "ua/client/browse_path.hpp"
 #include "ua/client/client.hpp"
+#include "ua/client/subscription.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
 #include "ua/types/status_codes.hpp"
@@ -37,8 +40,11 @@ uac::ClientConfig clientConfig(const ClientOptions& o) {
     return c;
 }
 
-std::unique_ptr<uac::Client> connect(const ClientOptions& o) {
-    auto client = std::make_unique<uac::Client>(clientConfig(o));
+// reconnect: for long-running commands (monitor, events), which follow the server.
+std::unique_ptr<uac::Client> connect(const ClientOptions& o, bool reconnect = false) {
+    uac::ClientConfig config = clientConfig(o);
+    config.reconnect.enabled = reconnect;
+    auto client = std::make_unique<uac::Client>(config);
     uac::Identity identity = uac::Anonymous{};
     if (!o.user.empty()) {
         auto [name, password] = splitUser(o.user);
@@ -770,6 +776,121 @@ int runCall(const ClientOptions& o, const CallOptions& c) {
         }
     }
     return r.status.isBad() ? kExitUaError : kExitOk;
+}
+
+// ---- monitor / events --------------------------------------------------------------------
+namespace {
+
+std::atomic<bool> g_interrupted{false};
+
+// Counts notifications and runs the client's event loop on this thread (callbacks print
+// from here) until Ctrl-C, --count or --duration.
+class NotificationLoop {
+  public:
+    NotificationLoop(int count, int durationMs) : count_(count) {
+        g_interrupted = false;
+        std::signal(SIGINT, [](int) { g_interrupted = true; });
+        std::signal(SIGTERM, [](int) { g_interrupted = true; });
+        if (durationMs > 0) end_ = uac::Clock::now() + std::chrono::milliseconds(durationMs);
+    }
+    ~NotificationLoop() {
+        std::signal(SIGINT, SIG_DFL);
+        std::signal(SIGTERM, SIG_DFL);
+    }
+    // One more notification; false once --count is reached.
+    bool note() { return count_ <= 0 || ++seen_ <= count_; }
+    void run(uac::Client& client) {
+        while (!g_interrupted && (count_ <= 0 || seen_ < count_) && uac::Clock::now() < end_)
+            client.runIterate(std::chrono::milliseconds(100));
+    }
+
+  private:
+    int count_;
+    int seen_ = 0;
+    uac::Clock::time_point end_ = uac::Clock::time_point::max();
+};
+
+uac::SubscriptionStatusCallback statusPrinter() {
+    return [](const uac::SubscriptionStatus& s) {
+        using K = uac::SubscriptionStatus::Kind;
+        if (s.kind == K::KeepAlive) return;
+        std::cerr << "subscription: " << static_cast<int>(s.kind) << " " << statusText(s.status)
+                  << " " << s.message << "\n";
+    };
+}
+
+}  // namespace
+
+int runMonitor(const ClientOptions& o, const MonitorOptions& m) {
+    for (const auto& n : m.nodes) checkNodeText(n);
+    if (m.interval <= 0) throw UsageError("--interval must be positive");
+    auto client = connect(o, true);
+    std::vector<NodeId> ids;
+    for (const auto& n : m.nodes) ids.push_back(resolveNode(*client, n));
+
+    NotificationLoop loop(m.count, m.durationMs);
+    uac::Subscription sub(*client, {.publishingInterval = m.interval}, statusPrinter());
+    std::vector<StatusCode> statuses;
+    auto items = sub.monitorValues(
+        ids,
+        [&](std::size_t i, const DataValue& v) {
+            if (!loop.note()) return;
+            const Variant empty;
+            const Variant& value = v.value ? *v.value : empty;
+            std::string time = v.sourceTimestamp ? dateTimeText(*v.sourceTimestamp) : "";
+            if (o.json) {
+                Json j = {{"node", m.nodes[i]},
+                          {"status", statusText(v.statusOrGood())},
+                          {"type", typeText(value)},
+                          {"value", toJson(value)}};
+                if (!time.empty()) j["sourceTimestamp"] = time;
+                std::cout << j.dump(-1, ' ', false, Json::error_handler_t::replace) << std::endl;
+            } else {
+                std::cout << m.nodes[i] << "\t" << time << "\t" << statusText(v.statusOrGood())
+                          << "\t" << toText(value) << std::endl;
+            }
+        },
+        {.samplingInterval = m.interval, .queueSize = 10}, &statuses);
+    bool anyBad = false;
+    for (std::size_t i = 0; i < statuses.size(); ++i) {
+        if (!statuses[i].isBad()) continue;
+        anyBad = true;
+        std::cerr << "error: " << m.nodes[i] << ": " << statusText(statuses[i]) << "\n";
+    }
+    if (anyBad && std::none_of(items.begin(), items.end(), [](auto& x) { return x.valid(); }))
+        return kExitUaError;
+    loop.run(*client);
+    return anyBad ? kExitUaError : kExitOk;
+}
+
+int runEvents(const ClientOptions& o, const EventsOptions& e) {
+    checkNodeText(e.node);
+    if (e.interval <= 0) throw UsageError("--interval must be positive");
+    std::vector<std::string> fields = splitList(e.select);
+    std::erase(fields, std::string());
+    if (fields.empty()) throw UsageError("--select names no field");
+    auto client = connect(o, true);
+    NodeId notifier = resolveNode(*client, e.node);
+
+    NotificationLoop loop(e.count, e.durationMs);
+    uac::Subscription sub(*client, {.publishingInterval = e.interval}, statusPrinter());
+    uac::EventOptions options;
+    options.select = fields;
+    auto item = sub.monitorEvents(notifier, options, [&](uac::EventFields& f) {
+        if (!loop.note()) return;
+        if (o.json) {
+            Json j = Json::object();
+            for (std::size_t i = 0; i < f.size() && i < fields.size(); ++i)
+                j[fields[i]] = toJson(f[i]);
+            std::cout << j.dump(-1, ' ', false, Json::error_handler_t::replace) << std::endl;
+        } else {
+            for (std::size_t i = 0; i < f.size() && i < fields.size(); ++i)
+                std::cout << (i ? "\t" : "") << fields[i] << "=" << toText(f[i]);
+            std::cout << std::endl;
+        }
+    });
+    loop.run(*client);
+    return kExitOk;
 }
 
 }  // namespace pnp::cli

@@ -47,12 +47,30 @@ struct CallOptions {
     std::string types;  // "Int32,Int32": overrides the InputArguments
 };
 
+// Subscriptions: print notifications until Ctrl-C, --count or --duration.
+struct MonitorOptions {
+    std::vector<std::string> nodes;
+    double interval = 100;  // publishing and sampling interval, ms
+    int count = 0;          // stop after this many notifications; 0: no limit
+    int durationMs = 0;     // stop after this long; 0: no limit
+};
+
+struct EventsOptions {
+    std::string node = "i=2253";  // the Server object
+    std::string select = "EventType,SourceName,Time,Severity,Message";
+    double interval = 100;
+    int count = 0;
+    int durationMs = 0;
+};
+
 int runServe(const ServeOptions& options);
 int runEndpoints(const ClientOptions& client);
 int runBrowse(const ClientOptions& client, const BrowseOptions& options);
 int runRead(const ClientOptions& client, const ReadOptions& options);
 int runWrite(const ClientOptions& client, const WriteOptions& options);
 int runCall(const ClientOptions& client, const CallOptions& options);
+int runMonitor(const ClientOptions& client, const MonitorOptions& options);
+int runEvents(const ClientOptions& client, const EventsOptions& options);
 
 // "NAME:PASSWORD" -> {NAME, PASSWORD}; throws UsageError.
 std::pair<std::string, std::string> splitUser(const std::string& text);

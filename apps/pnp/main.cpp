@@ -126,6 +126,33 @@ int main(int argc, char** argv) {
     call->add_option("--types", callOpts.types,
                      "comma-separated argument types, overriding InputArguments (Int32,Int32)");
 
+    ClientOptions moOpts;
+    MonitorOptions monitorOpts;
+    CLI::App* monitor = ua->add_subcommand("monitor", "subscribe to data changes and print them");
+    addClientOptions(monitor, moOpts);
+    monitor->add_option("NODE", monitorOpts.nodes, kNodeHelp)->required();
+    monitor->add_option("--interval", monitorOpts.interval, "publishing/sampling interval, ms")
+        ->capture_default_str();
+    monitor->add_option("--count", monitorOpts.count, "stop after N notifications (0: never)");
+    monitor->add_option("--duration", monitorOpts.durationMs, "stop after MS ms (0: never)");
+    monitor->footer("Runs until Ctrl-C, --count or --duration.");
+
+    ClientOptions evOpts;
+    EventsOptions eventsOpts;
+    CLI::App* events = ua->add_subcommand("events", "subscribe to events and print them");
+    addClientOptions(events, evOpts);
+    events->add_option("NODE", eventsOpts.node, "event notifier (default: the Server object)")
+        ->capture_default_str();
+    events
+        ->add_option("--select", eventsOpts.select,
+                     "comma-separated fields (browse paths like 2:CustomField or A/B)")
+        ->capture_default_str();
+    events->add_option("--interval", eventsOpts.interval, "publishing interval, ms")
+        ->capture_default_str();
+    events->add_option("--count", eventsOpts.count, "stop after N events (0: never)");
+    events->add_option("--duration", eventsOpts.durationMs, "stop after MS ms (0: never)");
+    events->footer("Runs until Ctrl-C, --count or --duration.");
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -134,7 +161,8 @@ int main(int argc, char** argv) {
     }
 
     const bool json = (*endpoints && epOpts.json) || (*browse && brOpts.json) ||
-                      (*read && rdOpts.json) || (*write && wrOpts.json) || (*call && clOpts.json);
+                      (*read && rdOpts.json) || (*write && wrOpts.json) || (*call && clOpts.json) ||
+                      (*monitor && moOpts.json) || (*events && evOpts.json);
     try {
         if (*serve) return runServe(serveOpts);
         if (*endpoints) return runEndpoints(epOpts);
@@ -142,6 +170,8 @@ int main(int argc, char** argv) {
         if (*read) return runRead(rdOpts, readOpts);
         if (*write) return runWrite(wrOpts, writeOpts);
         if (*call) return runCall(clOpts, callOpts);
+        if (*monitor) return runMonitor(moOpts, monitorOpts);
+        if (*events) return runEvents(evOpts, eventsOpts);
     } catch (const UsageError& e) {
         std::cerr << "error: " << e.what() << "\n";
         return kExitUsage;

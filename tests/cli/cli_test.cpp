@@ -594,6 +594,11 @@ TEST_F(CliTest, BadUsageExitsWithTwo) {
              {"ua", "read", url_, "i=85", "--timeout", "abc"},
              {"ua", "serve", "--port", "70000"},
              {"ua", "serve", "--no-anonymous"},
+             {"ua", "monitor", url_},
+             {"ua", "monitor", url_, "not-a-node"},
+             {"ua", "monitor", url_, "i=2258", "--interval", "0"},
+             {"ua", "events", url_, "not-a-node"},
+             {"ua", "events", url_, "--select", ","},
          }) {
         Result r = run(args);
         std::string cmd;
@@ -609,7 +614,8 @@ TEST_F(CliTest, HelpIsReadable) {
     EXPECT_NE(r.out.find("ua"), std::string::npos) << r.out;
     r = run({"ua", "--help"});
     EXPECT_EQ(r.exitCode, 0) << describe(r);
-    for (const char* sub : {"serve", "endpoints", "browse", "read", "write", "call"})
+    for (const char* sub :
+         {"serve", "endpoints", "browse", "read", "write", "call", "monitor", "events"})
         EXPECT_NE(r.out.find(sub), std::string::npos) << sub << "\n" << r.out;
     r = run({"ua", "write", "--help"});
     EXPECT_EQ(r.exitCode, 0) << describe(r);

@@ -14,6 +14,7 @@
 #include <unordered_map>
 
 #include "ua/client/browse_path.hpp"
+#include "ua/client/subscription_engine.hpp"
 #include "ua/types/ns0_ids.hpp"
 #include "ua/types/status_codes.hpp"
 
@@ -143,6 +144,7 @@ class Client::Impl {
     Clock::time_point lastSend{};
     std::vector<std::string> namespaces;
     ClientStats stats;
+    std::shared_ptr<SubscriptionEngine> subscriptions;  // null until the first Subscription
 
     // reconnect back-off (background / runIterate)
     Clock::time_point nextReconnect{};
@@ -403,6 +405,7 @@ class Client::Impl {
                     activateSession(deadline, done);
                     ++stats.sessionsReactivated;
                     ++stats.reconnects;
+                    notifySessionChange(SessionChange::Reactivated, done);
                     return;
                 } catch (const Error& e) {
                     if (!conn || !sessionGone(e.status())) throw;
@@ -411,6 +414,7 @@ class Client::Impl {
             createSession(deadline, done);
             activateSession(deadline, done);
             ++stats.reconnects;
+            notifySessionChange(SessionChange::Recreated, done);
         } catch (...) {
             dropConnection();
             throw;
@@ -422,6 +426,12 @@ class Client::Impl {
         deadline = std::min(deadline, Clock::now() + config.connectTimeout);
         createSession(deadline, done);
         activateSession(deadline, done);
+        notifySessionChange(SessionChange::Recreated, done);
+    }
+
+    // Subscriptions follow the session after the lock is released (they call the client).
+    void notifySessionChange(SessionChange change, Completions& done) {
+        if (subscriptions) done.add([e = subscriptions, change] { e->sessionChanged(change); });
     }
 
     // A connection that was idle for a while may have been closed by the server: look at the
@@ -594,7 +604,7 @@ class Client::Impl {
                 }
             }
         }
-        if (wantConnected && !conn && config.reconnect.enabled)
+        if (wantConnected && (!conn || sessionInvalid) && config.reconnect.enabled)
             next = std::min(next, std::max(now, nextReconnect));
         return std::min(next, nextAsyncDeadline);
     }
@@ -677,20 +687,31 @@ Client::Client(ClientConfig config) : impl_(std::make_unique<Impl>(std::move(con
 Client::~Client() {
     if (!impl_) return;
     stopBackgroundThread();
+    if (impl_->subscriptions) impl_->subscriptions->rebind(nullptr);
     disconnect();
 }
 
-Client::Client(Client&&) noexcept = default;
+Client::Client(Client&& o) noexcept : impl_(std::move(o.impl_)) {
+    if (impl_ && impl_->subscriptions) impl_->subscriptions->rebind(this);
+}
 
 Client& Client::operator=(Client&& o) noexcept {
     if (this != &o) {
         if (impl_) {
             stopBackgroundThread();
+            if (impl_->subscriptions) impl_->subscriptions->rebind(nullptr);
             disconnect();
         }
         impl_ = std::move(o.impl_);
+        if (impl_ && impl_->subscriptions) impl_->subscriptions->rebind(this);
     }
     return *this;
+}
+
+std::shared_ptr<SubscriptionEngine> Client::subscriptionEngine() {
+    std::lock_guard lock(impl_->mutex);
+    if (!impl_->subscriptions) impl_->subscriptions = std::make_shared<SubscriptionEngine>(this);
+    return impl_->subscriptions;
 }
 
 const ClientConfig& Client::config() const { return impl_->config; }

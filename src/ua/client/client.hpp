@@ -59,6 +59,9 @@
 // stopped and joined by stopBackgroundThread() and by the destructor. runIterate() does the
 // same work on the calling thread.
 //
+// Subscriptions: see subscription.hpp (Subscription, MonitoredItem); their Publish requests
+// are async requests of this client and complete on the threads named above.
+//
 // Performance. A blocking call is: encode into the transport buffer, one send, poll/recv on
 // the calling thread, decode; no thread hop. connect() costs TCP + HEL/ACK +
 // OpenSecureChannel + CreateSession + ActivateSession and nothing else (no NamespaceArray or
@@ -103,6 +106,8 @@ struct BrowseOptions {
     UInt32 resultMask = 0x3F;         // all ReferenceDescription fields
     UInt32 maxReferencesPerNode = 0;  // per Browse/BrowseNext; 0: the server's choice
 };
+
+class SubscriptionEngine;
 
 struct ClientStats {
     std::uint64_t requestsSent = 0;
@@ -254,6 +259,10 @@ class Client {
     void startBackgroundThread();
     void stopBackgroundThread();
     bool backgroundThreadRunning() const;
+
+    // The Publish loop of this client's subscriptions (subscription.hpp), created on first
+    // use.
+    std::shared_ptr<SubscriptionEngine> subscriptionEngine();
 
     class Impl;
 

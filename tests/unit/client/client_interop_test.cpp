@@ -31,17 +31,7 @@ using namespace std::chrono_literals;
 
 constexpr const char* kDemoUri = "urn:pnp:demo";
 
-UInt16 freePort() {
-    int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-    socklen_t len = sizeof a;
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    ::close(fd);
-    return ntohs(a.sin_port);
-}
+UInt16 freePort() { return pnp::testing::freeLoopbackPort(); }
 
 // Starts the node-opcua server once for all tests.
 class NodeServer : public ::testing::Environment {
