@@ -58,7 +58,10 @@ struct AddressSpace::Impl {
     std::uint16_t rtHasSubtype = kNoRefType, rtHasTypeDefinition = kNoRefType,
                   rtHasComponent = kNoRefType, rtHasProperty = kNoRefType,
                   rtHasEncoding = kNoRefType, rtOrganizes = kNoRefType, rtHierarchical = kNoRefType,
-                  rtAggregates = kNoRefType, rtHasModellingRule = kNoRefType;
+                  rtAggregates = kNoRefType, rtHasModellingRule = kNoRefType,
+                  rtHasInterface = kNoRefType;
+    // ModelUris whose nodes are loaded (the compiled ns0 and NodeSet2 XML files).
+    std::vector<std::string> loadedModels;
 
     // Shared reference arrays of the loaded NodeSets (RefList slices borrow from them).
     std::vector<std::unique_ptr<Ref[]>> refPools;
@@ -164,12 +167,15 @@ struct AddressSpace::Impl {
     void rememberWellKnownRefTypes();
     NodeId freshId(UInt16 ns);
     void deleteNode(NodeIndex i, bool children);
-    // Copies the Mandatory InstanceDeclarations of `type` (and supertypes) below `instance`.
-    void instantiate(NodeIndex instance, NodeIndex type, int depth = 0);
-    // Copies the Mandatory aggregated children of `declaration` below `instance`.
-    void copyDeclaredChildren(NodeIndex instance, NodeIndex declaration, int depth);
+    // Copies the Mandatory InstanceDeclarations of `type`, its supertypes and the interfaces
+    // they implement below `instance`, and the Optional ones named in `optional`.
+    void instantiate(NodeIndex instance, NodeIndex type, int depth = 0,
+                     const std::vector<QualifiedName>* optional = nullptr);
+    // Copies the Mandatory (and requested Optional) aggregated children of `declaration`.
+    void copyDeclaredChildren(NodeIndex instance, NodeIndex declaration, int depth,
+                              const std::vector<QualifiedName>* optional);
     NodeIndex copyDeclaration(NodeIndex parent, std::uint16_t refType, NodeIndex declaration,
-                              int depth);
+                              int depth, const std::vector<QualifiedName>* optional);
     std::shared_ptr<const MethodHandler> handlerOf(NodeIndex method) const {
         auto h = methods.find(method);
         if (h != methods.end() && h->second && *h->second) return h->second;
