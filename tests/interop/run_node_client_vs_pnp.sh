@@ -2,8 +2,9 @@
 # Run the node-opcua interop client against our server.
 #
 # usage: tests/interop/run_node_client_vs_pnp.sh PNP_BINARY PORT
-#   starts `PNP_BINARY ua serve --port PORT --user operator:secret` (node_client.js also
-#   opens a UserName session as operator/secret), waits (<= 10 s) for the port, runs
+#   starts `PNP_BINARY ua serve --port PORT --user operator:secret` with the Robotics test
+#   model (pnp.RobotCell.NodeSet2.xml; node_client.js also opens a UserName session as
+#   operator/secret), waits (<= 10 s) for the port, runs
 #   node_client.js against opc.tcp://127.0.0.1:PORT, stops the server by PID and
 #   exits with node_client's status.
 # Server output goes to $PNP_INTEROP_LOG_DIR (default: a temp dir), printed on failure.
@@ -47,7 +48,12 @@ trap cleanup EXIT
 trap 'exit 130' INT
 trap 'exit 143' TERM
 
-SERVE_ARGS=(ua serve --port "$PORT" --user operator:secret)
+# A Robotics (OPC 40010-1) model loaded from NodeSet2 XML, with two instances (node_client.js
+# browses and reads them).
+SERVE_ARGS=(ua serve --port "$PORT" --user operator:secret
+    --nodeset "$INTEROP_DIR/pnp.RobotCell.NodeSet2.xml"
+    --instance "nsu=http://opcfoundation.org/UA/Robotics/;i=1002=RobotSystem"
+    --instance "nsu=urn:pnp:robotcell;i=1001=Arm1")
 ilog "starting: $PNP_BINARY ${SERVE_ARGS[*]} (log: $SERVER_LOG)"
 "$PNP_BINARY" "${SERVE_ARGS[@]}" >"$SERVER_LOG" 2>&1 </dev/null &
 SERVER_PID=$!
