@@ -11,8 +11,9 @@
 //
 // Application API (RAII, value types; errors throw AddressSpaceError):
 //   addNamespace, namespaceArray, addObject, addVariable, addProperty, addMethod,
-//   addObjectType, addVariableType, addReferenceType, addDataType, addView, addReference,
-//   deleteReference, deleteNode, setValue, readValue, setValueCallback, setMethodHandler.
+//   addObjectType, addVariableType, addReferenceType, addDataType, addView, instantiate,
+//   addReference, deleteReference, deleteNode, setValue, readValue, setValueCallback,
+//   setMethodHandler. NodeSet2 XML files: loadNodeSetXml() in ua/server/nodeset_xml.hpp.
 //
 // Thread safety: every public member function may be called from any thread. The address
 // space is guarded by one reader/writer lock: Browse, TranslateBrowsePaths and Read take it

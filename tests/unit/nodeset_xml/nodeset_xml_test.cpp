@@ -154,7 +154,8 @@ TEST(NodeSetXml, UnionAndArrayOfStructuresValues) {
 TEST(NodeSetXml, CodecRejectsTruncatedBodiesAndWrongFieldTypes) {
     Loaded t;
     auto layout = t.space.structureLayout(NodeId(t.ns, 3002));
-    const auto* x = t.space.readValue(NodeId(t.ns, 6004)).value->scalar<ExtensionObject>();
+    const DataValue dv = t.space.readValue(NodeId(t.ns, 6004));
+    const auto* x = dv.value->scalar<ExtensionObject>();
     std::string body = x->body;
     for (std::size_t cut : {std::size_t{0}, std::size_t{3}, body.size() / 2, body.size() - 1})
         EXPECT_THROW(
@@ -265,6 +266,60 @@ TEST_F(NodeSetXmlErrors, DeeplyNestedValueIsBounded) {
                                   deep + "</Value></UAVariable>"));
     std::string e = errorOf(f);
     EXPECT_NE(e.find("nested too deeply"), std::string::npos) << e;
+}
+
+}  // namespace
+}  // namespace pnp::ua::server
+
+namespace pnp::ua::server {
+namespace {
+
+// The dynamic codec, driven by ns0's DataTypeDefinitions, reads and writes exactly the bytes
+// of the generated codecs (nested structures, arrays of structures, optional fields).
+template <class T>
+void expectSameAsGenerated(const AddressSpace& space, const T& value) {
+    const ExtensionObject x = toExtensionObject(value);
+    auto layout = space.structureLayout(NodeId(0, DataTypeInfo<T>::dataTypeId));
+    ASSERT_TRUE(layout) << DataTypeInfo<T>::name;
+    EXPECT_EQ(layout->binaryEncoding, x.typeId);
+    StructureLayoutLookup lookup = [&](const NodeId& id) { return space.structureLayout(id); };
+    StructureValue v = decodeStructure(*layout, reinterpret_cast<const Byte*>(x.body.data()),
+                                       x.body.size(), lookup);
+    EXPECT_EQ(encodeStructure(*layout, v, lookup), x.body) << DataTypeInfo<T>::name;
+}
+
+TEST(StructureCodec, MatchesTheGeneratedCodecsOfNamespaceZero) {
+    AddressSpace space;
+    Argument a;
+    a.name = "speed";
+    a.dataType = NodeId(0, ns0::Double);
+    a.valueRank = 1;
+    a.arrayDimensions = {3};
+    a.description = LocalizedText("en", "mm/s");
+    expectSameAsGenerated(space, a);
+    expectSameAsGenerated(space, Range{-1.5, 2.5});
+    EUInformation eu;
+    eu.namespaceUri = "http://www.opcfoundation.org/UA/units/un/cefact";
+    eu.unitId = 4403766;
+    eu.displayName = LocalizedText("", "mm");
+    expectSameAsGenerated(space, eu);
+    StructureDefinition sd;
+    sd.defaultEncodingId = NodeId(2, 5001);
+    sd.baseDataType = NodeId(0, ns0::Structure);
+    sd.structureType = StructureType::StructureWithOptionalFields;
+    sd.fields.resize(2);
+    sd.fields[0].name = "X";
+    sd.fields[0].dataType = NodeId(0, ns0::Double);
+    sd.fields[1].name = "Tags";
+    sd.fields[1].valueRank = 1;
+    sd.fields[1].arrayDimensions = {0};
+    sd.fields[1].isOptional = true;
+    expectSameAsGenerated(space, sd);  // an array of nested structures
+    BuildInfo b;
+    b.productUri = "urn:pnp";
+    b.softwareVersion = "1.0";
+    b.buildDate = DateTime{133000000000000000};
+    expectSameAsGenerated(space, b);  // DateTime, Strings
 }
 
 }  // namespace
