@@ -68,25 +68,47 @@ struct ModelHeader {
     std::vector<std::string> required;
 };
 
+// The elements <NamespaceUris> and <Models> precede the nodes: the head of the file is read
+// until both are complete (or the nodes begin), at most 16 MiB.
 ModelHeader readModelHeader(const std::filesystem::path& file) {
     ModelHeader h;
     std::ifstream in(file, std::ios::binary);
-    std::string head(256 * 1024, '\0');
-    in.read(head.data(), static_cast<std::streamsize>(head.size()));
-    head.resize(static_cast<std::size_t>(in.gcount()));
-    auto begin = head.find("<Models");
-    auto end = head.find("</Models>");
-    if (begin == std::string::npos || end == std::string::npos || end < begin) return h;
-    pugi::xml_document doc;
-    std::string part = head.substr(begin, end + 9 - begin);
-    if (!doc.load_buffer(part.data(), part.size())) return h;
-    for (pugi::xml_node m : doc.first_child().children()) {
+    std::string head;
+    for (std::size_t chunk = 64 * 1024; in && head.size() < (16u << 20); chunk *= 2) {
+        const std::size_t had = head.size();
+        head.resize(had + chunk);
+        in.read(head.data() + had, static_cast<std::streamsize>(chunk));
+        head.resize(had + static_cast<std::size_t>(in.gcount()));
+        if (head.find("</Models>") != std::string::npos) break;
+        bool nodesBegun = false;  // a node element other than the root <UANodeSet>
+        for (auto p = head.find("<UA"); p != std::string::npos && !nodesBegun;
+             p = head.find("<UA", p + 3))
+            nodesBegun = head.compare(p, 10, "<UANodeSet") != 0;
+        if (nodesBegun) break;
+    }
+    pugi::xml_document doc;  // holds one section at a time
+    auto section = [&](std::string_view open, std::string_view close) -> pugi::xml_node {
+        auto b = head.find(open);
+        auto e = head.find(close);
+        if (b == std::string::npos || e == std::string::npos || e < b) return {};
+        doc.reset();
+        std::string part = head.substr(b, e + close.size() - b);
+        return doc.load_buffer(part.data(), part.size()) ? doc.first_child() : pugi::xml_node{};
+    };
+    for (pugi::xml_node m : section("<Models", "</Models>").children()) {
         if (localName(m) != "Model") continue;
         h.models.emplace_back(m.attribute("ModelUri").value());
         for (pugi::xml_node r : m.children())
             if (localName(r) == "RequiredModel")
                 h.required.emplace_back(r.attribute("ModelUri").value());
     }
+    // Older files have no <Models>: their first namespace stands for the model.
+    if (h.models.empty())
+        for (pugi::xml_node u : section("<NamespaceUris", "</NamespaceUris>").children())
+            if (u.type() == pugi::node_element) {
+                h.models.emplace_back(trim(u.child_value()));
+                break;
+            }
     return h;
 }
 

@@ -257,6 +257,32 @@ TEST_F(NodeSetXmlErrors, DuplicateNodeIdAndMissingBrowseName) {
     EXPECT_NE(e.find("no BrowseName"), std::string::npos) << e;
 }
 
+TEST_F(NodeSetXmlErrors, AFileWithoutModelsIsFoundByItsFirstNamespace) {
+    // No <Models> (older files): the model is named by its first namespace URI.
+    write("old.xml", R"(<?xml version="1.0"?>
+<UANodeSet xmlns="http://opcfoundation.org/UA/2011/03/UANodeSet.xsd">
+  <NamespaceUris><Uri>urn:old</Uri></NamespaceUris>
+  <UAObjectType NodeId="ns=1;i=1" BrowseName="1:OldType">
+    <References><Reference ReferenceType="i=45" IsForward="false">i=58</Reference></References>
+  </UAObjectType>
+</UANodeSet>)");
+    auto f = write("new.xml", R"(<?xml version="1.0"?>
+<UANodeSet xmlns="http://opcfoundation.org/UA/2011/03/UANodeSet.xsd">
+  <NamespaceUris><Uri>urn:new</Uri><Uri>urn:old</Uri></NamespaceUris>
+  <Models><Model ModelUri="urn:new"><RequiredModel ModelUri="urn:old"/></Model></Models>
+  <UAObjectType NodeId="ns=1;i=1" BrowseName="1:NewType">
+    <References><Reference ReferenceType="i=45" IsForward="false">ns=2;i=1</Reference></References>
+  </UAObjectType>
+</UANodeSet>)");
+    AddressSpace space;
+    auto reports = loadNodeSetXml(space, f, {f.parent_path()});
+    ASSERT_EQ(reports.size(), 2u);
+    EXPECT_EQ(reports[0].modelUri, "urn:old");
+    const UInt16 oldNs = *space.namespaceIndex("urn:old");
+    const UInt16 newNs = *space.namespaceIndex("urn:new");
+    EXPECT_TRUE(space.isSubtypeOf(NodeId(newNs, 1), NodeId(oldNs, 1)));
+}
+
 TEST_F(NodeSetXmlErrors, DeeplyNestedValueIsBounded) {
     std::string deep;
     for (int i = 0; i < 200; ++i) deep += "<ListOfVariant><Variant>";
