@@ -131,10 +131,20 @@ class FileLoader {
         if (localName(root_) != "UANodeSet") fail("the root element is not <UANodeSet>");
         readNamespaces();
         readAliases();
-        createNodes();
-        createReferences();
-        createDefinitions();
-        setValues();
+        const auto first = static_cast<NodeIndex>(s_.nodes.size());
+        try {
+            createNodes();
+            createReferences();
+            createDefinitions();
+            setValues();
+        } catch (...) {
+            // A file loads completely or not at all: drop its nodes and their references
+            // (the namespaces it added stay in the NamespaceArray).
+            for (auto i = static_cast<NodeIndex>(s_.nodes.size()); i-- > first;)
+                s_.deleteNode(i, false);
+            s_.rememberWellKnownRefTypes();
+            throw;
+        }
     }
 
   private:
@@ -276,6 +286,7 @@ class FileLoader {
         n.nodeClass = cls;
         n.flags = Node::kAlive;
         s_.registerId(index, id);
+        ++s_.liveNodes;  // counted at once: a failure below rolls the node back
         n.browseNs = bn.namespaceIndex;
         n.browseName = str(bn.name);
         if (pugi::xml_node dn = child(el, "DisplayName")) {
@@ -351,7 +362,6 @@ class FileLoader {
             default:
                 break;
         }
-        ++s_.liveNodes;
         elements_.push_back({el, index});
     }
 

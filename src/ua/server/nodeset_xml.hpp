@@ -10,8 +10,8 @@
 // EnumDefinition).
 //
 // Errors throw NodeSetError, whose message names the file, the node and the problem; the
-// address space may then hold part of the file. Bounds: files up to 256 MiB, XML nesting
-// inside a value up to 32 levels.
+// nodes of the failing file are removed again (models it required, loaded before, stay). Bounds:
+// files up to 256 MiB, XML nesting inside a value up to 32 levels.
 #pragma once
 
 #include <filesystem>

@@ -247,6 +247,37 @@ TEST_F(NodeSetXmlErrors, BadValuesNameTheNode) {
     EXPECT_NE(e.find("unknown"), std::string::npos) << e;
 }
 
+TEST_F(NodeSetXmlErrors, AFailedFileLeavesNoNodesBehind) {
+    // The error is in the values (pass 3): nodes and references exist by then.
+    auto f = write("late.xml", nodeset(R"(<UAObject NodeId="ns=1;i=20" BrowseName="1:Cell">
+    <References><Reference ReferenceType="i=35" IsForward="false">i=85</Reference></References></UAObject>
+  <UAVariable NodeId="ns=1;i=21" BrowseName="1:V" DataType="i=6">
+    <References><Reference ReferenceType="HasComponent" IsForward="false">ns=1;i=20</Reference></References>
+    <Value><Int32 xmlns="http://opcfoundation.org/UA/2008/02/Types.xsd">x</Int32></Value></UAVariable>)"));
+    AddressSpace space;
+    const auto before = space.statistics();
+    EXPECT_THROW(loadNodeSetXml(space, f, {f.parent_path()}), NodeSetError);
+    const auto after = space.statistics();
+    EXPECT_EQ(after.nodes, before.nodes);
+    EXPECT_EQ(after.references, before.references);
+    EXPECT_FALSE(
+        space.resolvePath(NodeId(0, ns0::ObjectsFolder), std::vector<QualifiedName>{{2, "Cell"}}));
+    EXPECT_FALSE(isModelLoaded(space, "urn:bad"));
+    // A bad attribute of the second node: the first one goes again too.
+    auto g = write("attr.xml", nodeset(R"(<UAObject NodeId="ns=1;i=30" BrowseName="1:A"/>
+  <UAObject NodeId="ns=1;i=31" BrowseName="1:B" EventNotifier="lots"/>)"));
+    try {
+        loadNodeSetXml(space, g, {g.parent_path()});
+        ADD_FAILURE() << "no error";
+    } catch (const NodeSetError& e) {
+        EXPECT_NE(std::string(e.what()).find("ns=1;i=31"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("EventNotifier"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(space.statistics().nodes, before.nodes);
+    // The address space is still usable: a good file loads into it.
+    EXPECT_EQ(loadNodeSetXml(space, PNP_TEST_NODESET).size(), 1u);
+}
+
 TEST_F(NodeSetXmlErrors, DuplicateNodeIdAndMissingBrowseName) {
     auto f = write("dup.xml", nodeset(R"(<UAObject NodeId="i=85" BrowseName="Objects"/>)"));
     std::string e = errorOf(f);
