@@ -50,10 +50,7 @@ trap 'exit 143' TERM
 
 # A Robotics (OPC 40010-1) model loaded from NodeSet2 XML, with two instances (node_client.js
 # browses and reads them).
-SERVE_ARGS=(ua serve --port "$PORT" --user operator:secret
-    --nodeset "$INTEROP_DIR/pnp.RobotCell.NodeSet2.xml"
-    --instance "nsu=http://opcfoundation.org/UA/Robotics/;i=1002=RobotSystem"
-    --instance "nsu=urn:pnp:robotcell;i=1001=Arm1")
+SERVE_ARGS=(ua serve --port "$PORT" --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}")
 ilog "starting: $PNP_BINARY ${SERVE_ARGS[*]} (log: $SERVER_LOG)"
 "$PNP_BINARY" "${SERVE_ARGS[@]}" >"$SERVER_LOG" 2>&1 </dev/null &
 SERVER_PID=$!
