@@ -89,6 +89,7 @@ class Encoder {
             int bit = 0;
             for (const auto& f : fields) {
                 if (!f.isOptional) continue;
+                if (bit == 32) throw std::invalid_argument("more than 32 optional fields");
                 const Variant* v = value.field(f.name);
                 if (v != nullptr && !v->isEmpty()) mask |= UInt32{1} << bit;
                 ++bit;
@@ -196,8 +197,10 @@ class Decoder {
         int bit = 0;
         for (const auto& f : fields) {
             bool present = true;
-            if (f.isOptional && layout.form == StructureLayout::Form::WithOptionalFields)
+            if (f.isOptional && layout.form == StructureLayout::Form::WithOptionalFields) {
+                if (bit == 32) BinaryDecoder::fail("more than 32 optional fields");
                 present = ((mask >> bit++) & 1u) != 0;
+            }
             out.fields.emplace_back(f.name, present ? field(f) : Variant());
         }
         return out;
