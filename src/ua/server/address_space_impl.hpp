@@ -216,6 +216,13 @@ struct AddressSpace::Impl {
     bool referenceMatches(const Ref& r, BrowseDirection dir, std::uint16_t type,
                           bool includeSubtypes, UInt32 nodeClassMask) const;
 
+    // ---- structures of loaded models (nodeset_xml.cpp) --------------------------------------
+    // The layout of structure DataType `dt` from its DataTypeDefinition (nullptr: none).
+    std::shared_ptr<const StructureLayout> structureLayoutOf(NodeIndex dt) const;
+    // Whether a binary ExtensionObject body decodes as DataType `dt` by its definition. Types
+    // of namespace 0 are left to their generated codecs, types without a definition pass.
+    bool bodyFits(const ExtensionObject& x, NodeIndex dt) const;
+
     std::size_t bytesUsed() const;
 };
 

@@ -1053,11 +1053,32 @@ std::vector<NodeSetLoadReport> loadNodeSetXml(
     return session.take();
 }
 
+std::shared_ptr<const StructureLayout> AddressSpace::Impl::structureLayoutOf(NodeIndex dt) const {
+    return FileLoader::buildLayout(*this, dt);
+}
+
+bool AddressSpace::Impl::bodyFits(const ExtensionObject& x, NodeIndex dt) const {
+    if (x.encoding != ExtensionObject::Encoding::Binary || nodes[dt].ns == 0) return true;
+    auto layout = structureLayoutOf(dt);
+    if (!layout) return true;
+    StructureLayoutLookup lookup = [this](const NodeId& id) {
+        NodeIndex i = find(id);
+        return i == kNoNode ? nullptr : structureLayoutOf(i);
+    };
+    try {
+        decodeStructure(*layout, reinterpret_cast<const Byte*>(x.body.data()), x.body.size(),
+                        lookup);
+        return true;
+    } catch (const DecodeError&) {
+        return false;
+    }
+}
+
 std::shared_ptr<const StructureLayout> AddressSpace::structureLayout(const NodeId& dataType) const {
     std::shared_lock lock(impl_->mutex);
     NodeIndex dt = impl_->find(dataType);
     if (dt == kNoNode) return nullptr;
-    return FileLoader::buildLayout(*impl_, dt);
+    return impl_->structureLayoutOf(dt);
 }
 
 }  // namespace pnp::ua::server

@@ -151,6 +151,33 @@ TEST(NodeSetXml, UnionAndArrayOfStructuresValues) {
     EXPECT_TRUE(ok.isGood()) << ok.toString();
 }
 
+TEST(NodeSetXml, WrittenStructuresMustDecodeByTheirDefinition) {
+    Loaded t;
+    const NodeId target(t.ns, "Cell.Gripper.Target");  // DataType Target (a union), writable
+    auto layout = t.space.structureLayout(NodeId(t.ns, 3005));
+    StructureValue v;
+    v.fields.emplace_back("Program", Variant(String("weld")));
+    ExtensionObject x;
+    x.typeId = NodeId(t.ns, 5005);
+    x.encoding = ExtensionObject::Encoding::Binary;
+    x.body = encodeStructure(*layout, v, t.lookup());
+    WriteValue w;
+    w.nodeId = target;
+    w.attributeId = static_cast<UInt32>(AttributeId::Value);
+    w.value = DataValue(Variant(x));
+    EXPECT_TRUE(t.space.write(w).isGood());
+    x.body.resize(x.body.size() - 1);  // truncated String
+    w.value = DataValue(Variant(x));
+    EXPECT_EQ(t.space.write(w), status::BadTypeMismatch);
+    x.body = std::string("\x07\x00\x00\x00", 4);  // union switch field beyond the fields
+    w.value = DataValue(Variant(x));
+    EXPECT_EQ(t.space.write(w), status::BadTypeMismatch);
+    auto stored = t.space.readValue(target).value->scalar<ExtensionObject>()->body;
+    StructureValue back = decodeStructure(*layout, reinterpret_cast<const Byte*>(stored.data()),
+                                          stored.size(), t.lookup());
+    EXPECT_EQ(*back.field("Program")->scalar<String>(), "weld");
+}
+
 TEST(NodeSetXml, CodecRejectsTruncatedBodiesAndWrongFieldTypes) {
     Loaded t;
     auto layout = t.space.structureLayout(NodeId(t.ns, 3002));
