@@ -14,6 +14,8 @@ struct ServeOptions {
     std::string host = "0.0.0.0";
     std::vector<std::string> users;  // NAME:PASSWORD
     bool noAnonymous = false;
+    std::vector<std::string> nodesets;   // NodeSet2 XML files loaded at start (with their deps)
+    std::vector<std::string> instances;  // TYPE=NAME: an instance of TYPE below Objects
 };
 
 // Options every client subcommand takes.

@@ -74,6 +74,12 @@ int main(int argc, char** argv) {
     serve->add_option("--host", serveOpts.host, "address to listen on")->capture_default_str();
     serve->add_option("--user", serveOpts.users, "accept user NAME:PASSWORD (repeatable)");
     serve->add_flag("--no-anonymous", serveOpts.noAnonymous, "refuse anonymous sessions");
+    serve->add_option("--nodeset", serveOpts.nodesets,
+                      "load a NodeSet2 XML file and the models it requires (repeatable)");
+    serve->add_option("--instance", serveOpts.instances,
+                      "TYPE=NAME: instantiate ObjectType/VariableType TYPE (e.g. "
+                      "\"nsu=http://opcfoundation.org/UA/Robotics/;i=1002\") as NAME below "
+                      "Objects, node id ns=1;s=NAME (repeatable)");
     serve->footer("Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM.");
 
     ClientOptions epOpts;

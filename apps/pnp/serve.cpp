@@ -1,4 +1,6 @@
-// `pnp ua serve`: namespace 0 plus the demo namespace until SIGINT / SIGTERM.
+// `pnp ua serve`: namespace 0, the demo namespace and the NodeSet2 files given with
+// --nodeset (loaded from XML only when asked: the default start-up path stays XML-free)
+// until SIGINT / SIGTERM.
 #include <pthread.h>
 #include <signal.h>
 
@@ -11,6 +13,7 @@
 #include "commands.hpp"
 #include "output.hpp"
 #include "ua/demo/demo.hpp"
+#include "ua/server/nodeset_xml.hpp"
 #include "ua/server/server.hpp"
 
 namespace pnp::cli {
@@ -21,6 +24,39 @@ std::pair<std::string, std::string> splitUser(const std::string& text) {
         throw UsageError("--user expects NAME:PASSWORD, got \"" + text + "\"");
     return {text.substr(0, colon), text.substr(colon + 1)};
 }
+
+namespace {
+
+// --nodeset files (reporting the load time of each file) and --instance TYPE=NAME.
+void loadModels(ua::server::AddressSpace& space, const ServeOptions& o) {
+    using namespace pnp::ua;
+    for (const auto& file : o.nodesets)
+        for (const auto& r : server::loadNodeSetXml(space, file)) {
+            std::cerr << "pnp ua serve: loaded " << r.file.string() << " (" << r.modelUri
+                      << "): " << r.nodes << " nodes in " << r.loadMs << " ms";
+            if (!r.warnings.empty()) std::cerr << ", " << r.warnings.size() << " warning(s)";
+            std::cerr << std::endl;
+        }
+    for (const auto& spec : o.instances) {
+        auto eq = spec.rfind('=');
+        if (eq == std::string::npos || eq == 0 || eq + 1 == spec.size())
+            throw UsageError("--instance expects TYPE=NAME, got \"" + spec + "\"");
+        auto type = ExpandedNodeId::parse(spec.substr(0, eq));
+        if (!type) throw UsageError("--instance: bad type NodeId \"" + spec.substr(0, eq) + "\"");
+        NodeId typeId = type->nodeId;
+        if (!type->namespaceUri.empty()) {
+            auto ns = space.namespaceIndex(type->namespaceUri);
+            if (!ns)
+                throw UsageError("--instance: namespace " + type->namespaceUri + " is not loaded");
+            typeId.setNamespaceIndex(*ns);
+        }
+        const std::string name = spec.substr(eq + 1);
+        space.instantiate(NodeId(0, ua::ns0::ObjectsFolder), typeId, NodeId(1, name),
+                          QualifiedName{1, name});
+    }
+}
+
+}  // namespace
 
 int runServe(const ServeOptions& o) {
     using namespace pnp::ua;
@@ -51,6 +87,12 @@ int runServe(const ServeOptions& o) {
     // Declared after the server, so destroyed first: pending Demo.Sleep calls are completed
     // (BadShutdown) while the transport still exists.
     demo::DemoNamespace demoNamespace(server);
+    try {
+        loadModels(server.addressSpace(), o);
+    } catch (const std::exception& e) {
+        std::cerr << "error: " << e.what() << "\n";
+        return kExitUaError;
+    }
     try {
         server.start();
     } catch (const std::exception& e) {

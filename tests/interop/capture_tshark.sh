@@ -5,7 +5,8 @@
 # usage: tests/interop/capture_tshark.sh PNP_BINARY PORT
 #
 #   1. tshark captures on lo with capture filter "tcp port PORT" to a pcap
-#   2. starts `PNP_BINARY ua serve --port PORT`, runs node_client.js against it
+#   2. starts `PNP_BINARY ua serve --port PORT` (with the Robotics test model), runs
+#      node_client.js against it
 #   3. stops server and tshark by PID
 #   4. decodes the pcap with `-d tcp.port==PORT,opcua` and FAILS if
 #        - any packet is Malformed or carries an Expert Info of severity Error
@@ -83,7 +84,8 @@ wait_for_line "$OUT/tshark-capture.log" "Capture started" 2 "$TSHARK_PID" 2>/dev
 sleep 0.5
 
 # ---- 2. server + client ---------------------------------------------------------------
-"$PNP_BINARY" ua serve --port "$PORT" --user operator:secret >"$OUT/pnp-server.log" 2>&1 </dev/null &
+"$PNP_BINARY" ua serve --port "$PORT" --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}" \
+    >"$OUT/pnp-server.log" 2>&1 </dev/null &
 SERVER_PID=$!
 client_rc=99
 if wait_for_port "$PORT" 10 "$SERVER_PID"; then

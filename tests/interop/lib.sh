@@ -5,6 +5,13 @@
 INTEROP_DIR="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 REPO_ROOT="$(cd "$INTEROP_DIR/../.." && pwd)"
 
+# `pnp ua serve` arguments that load the Robotics test model and create the instances
+# node_client.js browses and reads (see pnp.RobotCell.NodeSet2.xml).
+# shellcheck disable=SC2034 # used by the scripts that source this file
+ROBOTICS_SERVE_ARGS=(--nodeset "$INTEROP_DIR/pnp.RobotCell.NodeSet2.xml"
+    --instance "nsu=http://opcfoundation.org/UA/Robotics/;i=1002=RobotSystem"
+    --instance "nsu=urn:pnp:robotcell;i=1001=Arm1")
+
 ilog() { printf '[%s] %s\n' "${INTEROP_NAME:-interop}" "$*" >&2; }
 
 # port_listening PORT -> 0 if something listens on TCP PORT (does not connect)

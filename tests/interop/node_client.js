@@ -367,6 +367,86 @@ async function main() {
         expect(dv.statusCode.value === StatusCodes.BadNodeIdUnknown.value, `status ${sc(dv.statusCode)}`);
     });
 
+    // ---- Robotics (OPC 40010-1) loaded from NodeSet2 XML ---------------------------------
+    // run_node_client_vs_pnp.sh starts the server with pnp.RobotCell.NodeSet2.xml (which
+    // requires Robotics, IA and DI) and two instances made by AddressSpace::instantiate:
+    // RobotSystem (Robotics MotionDeviceSystemType) and Arm1 (PnpArmType, a subtype of
+    // MotionDeviceType with a ToolLoad structure defined in pnp.RobotCell). Skipped when the
+    // server does not hold them (the node-opcua self test).
+    const ROBOTICS_URI = "http://opcfoundation.org/UA/Robotics/";
+    const CELL_URI = "urn:pnp:robotcell";
+    let roboticsNs = -1;
+    let cellNs = -1;
+    await check("Robotics and pnp.RobotCell namespaces loaded from NodeSet2 XML", async () => {
+        const dv = await session.read({ nodeId: "i=2255", attributeId: AttributeIds.Value });
+        const arr = dv.value.value || [];
+        roboticsNs = arr.indexOf(ROBOTICS_URI);
+        cellNs = arr.indexOf(CELL_URI);
+        if (roboticsNs < 0 || cellNs < 0) throw new Skip("server has no Robotics model loaded");
+        expect(arr.includes("http://opcfoundation.org/UA/DI/"), "DI (required by Robotics) missing");
+    });
+    // Forward hierarchical children of a node by BrowseName.
+    async function childrenOf(nodeId) {
+        const r = await session.browse({
+            nodeId,
+            browseDirection: BrowseDirection.Forward,
+            referenceTypeId: "i=33",
+            includeSubtypes: true,
+            resultMask: 63,
+        });
+        expectGood(r.statusCode, `browse ${nodeId}`);
+        const byName = new Map();
+        for (const ref of r.references) byName.set(ref.browseName.toString(), ref);
+        return byName;
+    }
+    if (roboticsNs >= 0 && cellNs >= 0) {
+        await check("browse RobotSystem: a MotionDeviceSystemType instance with its Mandatory folders", async () => {
+            const objects = await childrenOf("i=85");
+            const sys = objects.get("1:RobotSystem");
+            expect(sys, `RobotSystem not below Objects (${[...objects.keys()].join(", ")})`);
+            expect(sys.typeDefinition.toString() === `ns=${roboticsNs};i=1002`,
+                `TypeDefinition ${sys.typeDefinition.toString()}`);
+            const kids = await childrenOf(sys.nodeId);
+            for (const name of ["MotionDevices", "Controllers", "SafetyStates"])
+                expect(kids.has(`${roboticsNs}:${name}`), `no ${name} (${[...kids.keys()].join(", ")})`);
+        });
+        await check("browse Arm1: Mandatory children of PnpArmType, MotionDeviceType and DI", async () => {
+            const kids = await childrenOf(`ns=1;s=Arm1`);
+            const diNs = (await session.read({ nodeId: "i=2255", attributeId: AttributeIds.Value }))
+                .value.value.indexOf("http://opcfoundation.org/UA/DI/");
+            const want = [`${roboticsNs}:Axes`, `${roboticsNs}:PowerTrains`,
+                `${roboticsNs}:MotionDeviceCategory`, `${diNs}:Manufacturer`, `${diNs}:SerialNumber`,
+                `${cellNs}:ToolLoad`];
+            for (const name of want) expect(kids.has(name), `no ${name} (${[...kids.keys()].join(", ")})`);
+            expect(!kids.has(`${roboticsNs}:FlangeLoad`), "Optional FlangeLoad was instantiated");
+        });
+        await check("read Arm1.MotionDeviceCategory: DataType is the Robotics enumeration", async () => {
+            const [dt, v] = await session.read([
+                { nodeId: "ns=1;s=Arm1.MotionDeviceCategory", attributeId: AttributeIds.DataType },
+                { nodeId: "ns=1;s=Arm1.MotionDeviceCategory", attributeId: AttributeIds.Value },
+            ]);
+            expectGood(dt.statusCode, "read DataType");
+            expect(dt.value.value.toString() === `ns=${roboticsNs};i=18193`, `DataType ${dt.value.value}`);
+            expectGood(v.statusCode, "read Value");
+        });
+        await check("read Arm1.ToolLoad: a structure of pnp.RobotCell decoded from its DataTypeDefinition", async () => {
+            const dt = await session.read({ nodeId: "ns=1;s=Arm1.ToolLoad", attributeId: AttributeIds.DataType });
+            expect(dt.value.value.toString() === `ns=${cellNs};i=3001`, `DataType ${dt.value.value}`);
+            const dv = await session.read({ nodeId: "ns=1;s=Arm1.ToolLoad", attributeId: AttributeIds.Value });
+            expectGood(dv.statusCode, "read Value");
+            expect(dv.value.dataType === DataType.ExtensionObject, `got ${describeVariant(dv.value)}`);
+            // node-opcua decodes the body with the StructureDefinition it reads from the server.
+            const { promoteOpaqueStructure } = require("node-opcua-client-dynamic-extension-object");
+            await promoteOpaqueStructure(session, [dv]);
+            const load = dv.value.value;
+            expect(load && load.name === "vacuum-gripper", `name: ${oneLine(JSON.stringify(load))}`);
+            expect(load.mass === 2.5, `mass ${load.mass}`);
+            const com = load.centerOfMass;
+            expect(com && com.x === 0 && com.y === 0.01 && com.z === 0.12,
+                `centerOfMass ${oneLine(JSON.stringify(com))}`);
+        });
+    }
+
     await check("CloseSession (anonymous)", async () => {
         await session.close();
         session = null;

@@ -3,10 +3,11 @@
 # interop harness can be checked on its own:
 #   tests/interop/node_server_as_pnp.sh ua serve --port PORT [--user NAME:PASSWORD]...
 # (tests/interop/run_node_self_test.sh uses it.) node_server.js always accepts anonymous and
-# operator/secret, so --user arguments are accepted and ignored.
+# operator/secret, so --user arguments are accepted and ignored; so are --nodeset and
+# --instance (node_server.js loads no Robotics model: node_client.js skips those checks).
 set -euo pipefail
 usage() {
-    echo "usage: $0 ua serve --port PORT [--user NAME:PASSWORD]..." >&2
+    echo "usage: $0 ua serve --port PORT [--user NAME:PASSWORD | --nodeset FILE | --instance SPEC]..." >&2
     exit 2
 }
 if [[ $# -lt 4 || "$1" != "ua" || "$2" != "serve" || "$3" != "--port" ]]; then
@@ -14,7 +15,7 @@ if [[ $# -lt 4 || "$1" != "ua" || "$2" != "serve" || "$3" != "--port" ]]; then
 fi
 rest=("${@:5}")
 while ((${#rest[@]} > 0)); do
-    [[ "${rest[0]}" == "--user" && ${#rest[@]} -ge 2 ]] || usage
+    [[ "${rest[0]}" =~ ^--(user|nodeset|instance)$ && ${#rest[@]} -ge 2 ]] || usage
     rest=("${rest[@]:2}")
 done
 exec node "$(dirname "${BASH_SOURCE[0]}")/node_server.js" "$4"

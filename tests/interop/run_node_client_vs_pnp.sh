@@ -4,10 +4,11 @@
 # usage: tests/interop/run_node_client_vs_pnp.sh PNP_BINARY PORT [CLIENT_SCRIPT]
 #   CLIENT_SCRIPT: the node script to run (default node_client.js; node_subscriber.js
 #   for subscriptions and events), from tests/interop.
-#   starts `PNP_BINARY ua serve --port PORT --user operator:secret` (node_client.js also
-#   opens a UserName session as operator/secret), waits (<= 10 s) for the port, runs
-#   node_client.js against opc.tcp://127.0.0.1:PORT, stops the server by PID and
-#   exits with node_client's status.
+#   starts `PNP_BINARY ua serve --port PORT --user operator:secret` with the Robotics test
+#   model (pnp.RobotCell.NodeSet2.xml; node_client.js also opens a UserName session as
+#   operator/secret), waits (<= 10 s) for the port, runs
+#   the client script against opc.tcp://127.0.0.1:PORT, stops the server by PID and
+#   exits with the client's status.
 # Server output goes to $PNP_INTEROP_LOG_DIR (default: a temp dir), printed on failure.
 set -uo pipefail
 export INTEROP_NAME=node-client-vs-pnp
@@ -15,7 +16,7 @@ export INTEROP_NAME=node-client-vs-pnp
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
 if [[ $# -lt 2 ]]; then
-    echo "usage: $0 PNP_BINARY PORT" >&2
+    echo "usage: $0 PNP_BINARY PORT [CLIENT_SCRIPT]" >&2
     exit 2
 fi
 PNP_BINARY="$1"
@@ -50,7 +51,9 @@ trap cleanup EXIT
 trap 'exit 130' INT
 trap 'exit 143' TERM
 
-SERVE_ARGS=(ua serve --port "$PORT" --user operator:secret)
+# A Robotics (OPC 40010-1) model loaded from NodeSet2 XML, with two instances (node_client.js
+# browses and reads them).
+SERVE_ARGS=(ua serve --port "$PORT" --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}")
 ilog "starting: $PNP_BINARY ${SERVE_ARGS[*]} (log: $SERVER_LOG)"
 "$PNP_BINARY" "${SERVE_ARGS[@]}" >"$SERVER_LOG" 2>&1 </dev/null &
 SERVER_PID=$!

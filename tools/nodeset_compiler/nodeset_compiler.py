@@ -708,7 +708,10 @@ def encode_definition(ns, node):
             else:
                 body.i32(0)
             body.u32(int(f.get("MaxStringLength", "0")))
-            body.u8(1 if parse_bool(f.get("IsOptional", "false")) else 0)
+            # In a structure with subtyped values the flag says that the field allows
+            # subtypes (OPC 10000-3 §8.51).
+            body.u8(1 if parse_bool(f.get("IsOptional", "false")) or
+                    parse_bool(f.get("AllowSubTypes", "false")) else 0)
         enc_dt = ns.datatype_by_name("StructureDefinition").nodeid
     out = Bin()
     out.nodeid(ns.binary_encoding(enc_dt))

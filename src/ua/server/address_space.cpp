@@ -26,6 +26,7 @@ AddressSpace::Impl::Impl(Options o) : options(std::move(o)) {
     if (options.loadNamespaceZero) {
         auto t0 = std::chrono::steady_clock::now();
         loadNodeSet(generated::kNs0Blob, generated::kNs0BlobSize);
+        loadedModels.emplace_back(kUaNamespace);
         ns0LoadMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                         .count();
     }
@@ -95,6 +96,7 @@ void AddressSpace::Impl::rememberWellKnownRefTypes() {
     rtHierarchical = dense(ns0::HierarchicalReferences);
     rtAggregates = dense(ns0::Aggregates);
     rtHasModellingRule = dense(ns0::HasModellingRule);
+    rtHasInterface = dense(ns0::HasInterface);
 }
 
 void AddressSpace::Impl::rebuildSubtypeClosure() {
@@ -233,17 +235,38 @@ namespace {
 constexpr int kMaxInstantiationDepth = 16;
 }
 
-void AddressSpace::Impl::instantiate(NodeIndex instance, NodeIndex type, int depth) {
+void AddressSpace::Impl::instantiate(NodeIndex instance, NodeIndex type, int depth,
+                                     const std::vector<QualifiedName>* optional) {
+    // The type's own declarations first: they override those of supertypes and interfaces
+    // (a child that already exists by BrowseName is not copied again).
+    std::vector<NodeIndex> interfaces;
     for (int d = 0; type != kNoNode && d < 64; ++d) {
-        copyDeclaredChildren(instance, type, depth);
+        copyDeclaredChildren(instance, type, depth, optional);
+        for (const Ref& r : nodes[type].refs)
+            if (r.type == rtHasInterface && r.isForward() && !r.isExternal())
+                interfaces.push_back(r.target);
         type = supertypeOf(type);
     }
+    const NodeIndex base = find(ns0::BaseInterfaceType);
+    for (NodeIndex i : interfaces)
+        for (int d = 0; i != kNoNode && i != base && d < 64; ++d, i = supertypeOf(i))
+            copyDeclaredChildren(instance, i, depth, optional);
 }
 
-void AddressSpace::Impl::copyDeclaredChildren(NodeIndex instance, NodeIndex declaration,
-                                              int depth) {
+void AddressSpace::Impl::copyDeclaredChildren(NodeIndex instance, NodeIndex declaration, int depth,
+                                              const std::vector<QualifiedName>* optional) {
     if (depth >= kMaxInstantiationDepth || rtAggregates == kNoRefType) return;
     const NodeIndex mandatory = find(ns0::ModellingRule_Mandatory);
+    const NodeIndex optionalRule = find(ns0::ModellingRule_Optional);
+    auto requested = [&](NodeIndex c) {
+        if (optional == nullptr || optionalRule == kNoNode ||
+            forwardTarget(c, rtHasModellingRule) != optionalRule)
+            return false;
+        const Node& n = nodes[c];
+        return std::any_of(optional->begin(), optional->end(), [&](const QualifiedName& q) {
+            return q.namespaceIndex == n.browseNs && q.name == strings.get(n.browseName);
+        });
+    };
     struct Child {
         std::uint16_t type;
         NodeIndex node;
@@ -259,19 +282,20 @@ void AddressSpace::Impl::copyDeclaredChildren(NodeIndex instance, NodeIndex decl
         if (!r.isForward() || r.isExternal() || !refTypeMatches(r.type, rtAggregates, true))
             continue;
         if ((mandatory != kNoNode && forwardTarget(r.target, rtHasModellingRule) == mandatory) ||
-            (isMethod && r.type == rtHasProperty && isArguments(r.target)))
+            (isMethod && r.type == rtHasProperty && isArguments(r.target)) || requested(r.target))
             children.push_back({r.type, r.target});
     }
     for (const Child& c : children) {
         const Node& decl = nodes[c.node];
         QualifiedName name{decl.browseNs, String(strings.get(decl.browseName))};
         if (childByName(instance, name) != kNoNode) continue;  // overridden by a subtype
-        copyDeclaration(instance, c.type, c.node, depth + 1);
+        copyDeclaration(instance, c.type, c.node, depth + 1, optional);
     }
 }
 
 NodeIndex AddressSpace::Impl::copyDeclaration(NodeIndex parent, std::uint16_t refType,
-                                              NodeIndex declaration, int depth) {
+                                              NodeIndex declaration, int depth,
+                                              const std::vector<QualifiedName>* optional) {
     const Node& d = nodes[declaration];
     const NodeClassBits cls = d.nodeClass;
     if (cls != NodeClassBits::Object && cls != NodeClassBits::Variable &&
@@ -321,8 +345,9 @@ NodeIndex AddressSpace::Impl::copyDeclaration(NodeIndex parent, std::uint16_t re
     link(parent, refType, index);
     NodeIndex td = typeDefinitionOf(declaration);
     if (td != kNoNode) link(index, rtHasTypeDefinition, td);
-    copyDeclaredChildren(index, declaration, depth);  // the declaration's own children first
-    if (td != kNoNode) instantiate(index, td, depth);
+    // the declaration's own children first
+    copyDeclaredChildren(index, declaration, depth, optional);
+    if (td != kNoNode) instantiate(index, td, depth, optional);
     return index;
 }
 
@@ -375,8 +400,12 @@ ContinuationPointStore::Point ContinuationPointStore::take(Point* p) {
 // ---- AddressSpace: construction and introspection ------------------------------------------
 AddressSpace::AddressSpace() : AddressSpace(Options{}) {}
 AddressSpace::AddressSpace(Options options) : impl_(std::make_unique<Impl>(std::move(options))) {
+    serveNamespaceArray();
+}
+
+void AddressSpace::serveNamespaceArray() {
     // Namespace array served live.
-    if (impl_->find(ns0::Server_NamespaceArray) != kNoNode) {
+    if (contains(NodeId(0, ns0::Server_NamespaceArray))) {
         setValueCallback(
             NodeId(0, ns0::Server_NamespaceArray),
             ValueCallbacks{[this](const NodeId&) { return DataValue{Variant{namespaceArray()}}; },
@@ -514,6 +543,44 @@ NodeId AddressSpace::addObject(const NodeId& parent, const NodeId& id,
     s.link(p, rt, i);
     s.link(i, s.rtHasTypeDefinition, td);
     if (attributes.instantiateMandatory) s.instantiate(i, td);
+    return s.idOf(i);
+}
+
+NodeId AddressSpace::instantiate(const NodeId& parent, const NodeId& type, const NodeId& id,
+                                 const QualifiedName& browseName,
+                                 const InstantiateOptions& options) {
+    auto lock = impl_->lockForChange();
+    Impl& s = *impl_;
+    NodeIndex p = need(s, parent, status::BadParentNodeIdInvalid, "parent");
+    NodeIndex td = need(s, type, status::BadTypeDefinitionInvalid, "type definition");
+    const NodeClassBits cls = s.nodes[td].nodeClass;
+    if ((cls != NodeClassBits::ObjectType && cls != NodeClassBits::VariableType) ||
+        s.nodes[td].has(Node::kIsAbstract))
+        throw AddressSpaceError(status::BadTypeDefinitionInvalid,
+                                type.toString() + " is not a concrete ObjectType or VariableType");
+    std::uint16_t rt = refTypeFor(s, options.referenceType, p);
+    NodeAttributes a;
+    a.displayName = options.displayName;
+    const bool isObject = cls == NodeClassBits::ObjectType;
+    NodeIndex i =
+        s.createNode(id, isObject ? NodeClassBits::Object : NodeClassBits::Variable, browseName, a);
+    if (!isObject) {
+        const NodeExtra* from = s.nodes[td].extra.get();
+        auto x = std::make_unique<NodeExtra>();
+        if (from != nullptr) {
+            x->dataType = from->dataType;
+            // A VariableType's ValueRank may be Any (-2); an instance keeps it.
+            x->valueRank = from->valueRank;
+            x->arrayDimensions = from->arrayDimensions;
+            x->value.encoded = from->value.encoded;
+            x->value.encodedSize = from->value.encodedSize;
+            if (from->value.owned) x->value.owned = std::make_unique<DataValue>(*from->value.owned);
+        }
+        s.nodes[i].extra = std::move(x);
+    }
+    s.link(p, rt, i);
+    s.link(i, s.rtHasTypeDefinition, td);
+    s.instantiate(i, td, 0, &options.optionalChildren);
     return s.idOf(i);
 }
 

@@ -11,8 +11,9 @@
 //
 // Application API (RAII, value types; errors throw AddressSpaceError):
 //   addNamespace, namespaceArray, addObject, addVariable, addProperty, addMethod,
-//   addObjectType, addVariableType, addReferenceType, addDataType, addView, addReference,
-//   deleteReference, deleteNode, setValue, readValue, setValueCallback, setMethodHandler.
+//   addObjectType, addVariableType, addReferenceType, addDataType, addView, instantiate,
+//   addReference, deleteReference, deleteNode, setValue, readValue, setValueCallback,
+//   setMethodHandler. NodeSet2 XML files: loadNodeSetXml() in ua/server/nodeset_xml.hpp.
 //
 // Thread safety: every public member function may be called from any thread. The address
 // space is guarded by one reader/writer lock: Browse, TranslateBrowsePaths and Read take it
@@ -56,6 +57,8 @@
 namespace pnp::ua::server {
 
 // Thrown by the application API (never by the services, which report StatusCodes).
+struct StructureLayout;  // ua/server/structure_codec.hpp
+
 class AddressSpaceError : public std::runtime_error {
   public:
     AddressSpaceError(StatusCode s, const std::string& what)
@@ -208,6 +211,16 @@ struct DataTypeAttributes : NodeAttributes {
     ExtensionObject definition;
 };
 
+// What AddressSpace::instantiate creates besides the Mandatory children.
+struct InstantiateOptions {
+    LocalizedText displayName;  // empty: the BrowseName's name
+    // Optional InstanceDeclarations (ModellingRule Optional) to create too, by BrowseName,
+    // at any depth below the instance.
+    std::vector<QualifiedName> optionalChildren;
+    // The reference from the parent; null: as addObject / addVariable choose.
+    NodeId referenceType;
+};
+
 struct ViewAttributes : NodeAttributes {
     bool containsNoLoops = false;
     Byte eventNotifier = 0;
@@ -292,6 +305,15 @@ class AddressSpace {
     NodeId addView(const NodeId& parent, const NodeId& id, const QualifiedName& browseName,
                    const ViewAttributes& attributes = {});
 
+    // Creates an instance of an ObjectType or VariableType below `parent` in one call: an
+    // Object or Variable (a Variable takes DataType, ValueRank, ArrayDimensions and Value
+    // from its type) with HasTypeDefinition, and the children its InstanceDeclarations
+    // require (OPC 10000-3 §6.4): the Mandatory ones of the type, of each supertype and of
+    // every interface they implement (HasInterface), the Optional ones listed in `options`;
+    // placeholders are never instantiated, ModellingRules never copied.
+    NodeId instantiate(const NodeId& parent, const NodeId& type, const NodeId& id,
+                       const QualifiedName& browseName, const InstantiateOptions& options = {});
+
     // References. The target may be a node of another server (not browsed further).
     void addReference(const NodeId& source, const NodeId& referenceType,
                       const ExpandedNodeId& target, bool isForward = true);
@@ -356,11 +378,17 @@ class AddressSpace {
     StatusCode checkValue(const Variant& value, const NodeId& dataType, Int32 valueRank,
                           std::span<const UInt32> arrayDimensions = {}) const;
     bool isSubtypeOf(const NodeId& type, const NodeId& base) const;
+    // The binary layout of a structure DataType from its DataTypeDefinition, for the dynamic
+    // structure codec (ua/server/structure_codec.hpp); nullptr for other nodes.
+    std::shared_ptr<const StructureLayout> structureLayout(const NodeId& dataType) const;
 
     // Internal state (defined in address_space_impl.hpp, private to pnp_ua_server).
     struct Impl;
 
   private:
+    friend struct NodeSetXmlAccess;  // the NodeSet2 XML loader (nodeset_xml.cpp)
+    // Serves Server.NamespaceArray from namespaceArray() once namespace 0 is loaded.
+    void serveNamespaceArray();
     std::unique_ptr<Impl> impl_;
 };
 

@@ -59,7 +59,10 @@ struct AddressSpace::Impl {
     std::uint16_t rtHasSubtype = kNoRefType, rtHasTypeDefinition = kNoRefType,
                   rtHasComponent = kNoRefType, rtHasProperty = kNoRefType,
                   rtHasEncoding = kNoRefType, rtOrganizes = kNoRefType, rtHierarchical = kNoRefType,
-                  rtAggregates = kNoRefType, rtHasModellingRule = kNoRefType;
+                  rtAggregates = kNoRefType, rtHasModellingRule = kNoRefType,
+                  rtHasInterface = kNoRefType;
+    // ModelUris whose nodes are loaded (the compiled ns0 and NodeSet2 XML files).
+    std::vector<std::string> loadedModels;
 
     // Shared reference arrays of the loaded NodeSets (RefList slices borrow from them).
     std::vector<std::unique_ptr<Ref[]>> refPools;
@@ -169,12 +172,15 @@ struct AddressSpace::Impl {
     void rememberWellKnownRefTypes();
     NodeId freshId(UInt16 ns);
     void deleteNode(NodeIndex i, bool children);
-    // Copies the Mandatory InstanceDeclarations of `type` (and supertypes) below `instance`.
-    void instantiate(NodeIndex instance, NodeIndex type, int depth = 0);
-    // Copies the Mandatory aggregated children of `declaration` below `instance`.
-    void copyDeclaredChildren(NodeIndex instance, NodeIndex declaration, int depth);
+    // Copies the Mandatory InstanceDeclarations of `type`, its supertypes and the interfaces
+    // they implement below `instance`, and the Optional ones named in `optional`.
+    void instantiate(NodeIndex instance, NodeIndex type, int depth = 0,
+                     const std::vector<QualifiedName>* optional = nullptr);
+    // Copies the Mandatory (and requested Optional) aggregated children of `declaration`.
+    void copyDeclaredChildren(NodeIndex instance, NodeIndex declaration, int depth,
+                              const std::vector<QualifiedName>* optional);
     NodeIndex copyDeclaration(NodeIndex parent, std::uint16_t refType, NodeIndex declaration,
-                              int depth);
+                              int depth, const std::vector<QualifiedName>* optional);
     std::shared_ptr<const MethodHandler> handlerOf(NodeIndex method) const {
         auto h = methods.find(method);
         if (h != methods.end() && h->second && *h->second) return h->second;
@@ -214,6 +220,13 @@ struct AddressSpace::Impl {
     ReferenceDescription describe(const Ref& r, UInt32 resultMask) const;
     bool referenceMatches(const Ref& r, BrowseDirection dir, std::uint16_t type,
                           bool includeSubtypes, UInt32 nodeClassMask) const;
+
+    // ---- structures of loaded models (nodeset_xml.cpp) --------------------------------------
+    // The layout of structure DataType `dt` from its DataTypeDefinition (nullptr: none).
+    std::shared_ptr<const StructureLayout> structureLayoutOf(NodeIndex dt) const;
+    // Whether a binary ExtensionObject body decodes as DataType `dt` by its definition. Types
+    // of namespace 0 are left to their generated codecs, types without a definition pass.
+    bool bodyFits(const ExtensionObject& x, NodeIndex dt) const;
 
     std::size_t bytesUsed() const;
 };

@@ -235,7 +235,8 @@ bool AddressSpace::Impl::builtinMatches(BuiltinType b, const Variant& v, NodeInd
                         break;
                     }
             }
-            return dt != kNoNode && isSubtype(dt, dataType);
+            // The body of a structure of a loaded model must decode by its definition.
+            return dt != kNoNode && isSubtype(dt, dataType) && bodyFits(x, dt);
         };
         if (const auto* one = v.scalar<ExtensionObject>()) return fits(*one);
         if (const auto* arr = v.array<ExtensionObject>())
