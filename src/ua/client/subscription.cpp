@@ -457,18 +457,36 @@ void SubscriptionEngine::createItems(SubscriptionState& sub,
     for (std::size_t start = 0; start < items.size(); start += kItemsPerRequest) {
         std::size_t end = std::min(items.size(), start + kItemsPerRequest);
         CreateMonitoredItemsRequest req{};
+        std::vector<bool> fresh(end - start);  // registered here (not already, as on recreate)
         {
+            // Registered before the request goes out: the server may send an item's first
+            // notification (a held Publish answered at once) before the
+            // CreateMonitoredItems response, and it must not be dropped as unknown.
             std::lock_guard lock(mutex_);
             req.subscriptionId = sub.revised.subscriptionId;
             req.timestampsToReturn = items[start]->timestamps;
-            for (std::size_t i = start; i < end; ++i)
+            for (std::size_t i = start; i < end; ++i) {
                 req.itemsToCreate.push_back(
                     {items[i]->itemToMonitor, items[i]->mode, items[i]->parameters});
+                fresh[i - start] = sub.items.emplace(items[i]->clientHandle, items[i]).second;
+            }
         }
-        auto results = c.request(std::move(req), dl).results;
-        if (results.size() != end - start)
-            throw Error(status::BadUnexpectedError,
-                        "CreateMonitoredItems: result count does not match the request");
+        auto unregister = [&](std::size_t from, std::size_t to, bool onlyBad) {
+            for (std::size_t i = from; i < to; ++i)
+                if (fresh[i - from] && (!onlyBad || statuses[i].isBad()))
+                    sub.items.erase(items[i]->clientHandle);
+        };
+        std::vector<MonitoredItemCreateResult> results;
+        try {
+            results = c.request(std::move(req), dl).results;
+            if (results.size() != end - start)
+                throw Error(status::BadUnexpectedError,
+                            "CreateMonitoredItems: result count does not match the request");
+        } catch (...) {
+            std::lock_guard lock(mutex_);
+            unregister(start, end, false);
+            throw;
+        }
         std::lock_guard lock(mutex_);
         for (std::size_t i = start; i < end; ++i) {
             const MonitoredItemCreateResult& r = results[i - start];
@@ -477,6 +495,7 @@ void SubscriptionEngine::createItems(SubscriptionState& sub,
             items[i]->revisedSamplingInterval = r.revisedSamplingInterval;
             items[i]->revisedQueueSize = r.revisedQueueSize;
         }
+        unregister(start, end, true);
     }
 }
 
@@ -554,15 +573,11 @@ std::vector<MonitoredItem> Subscription::monitorValues(
     std::vector<StatusCode> results;
     engine_->createItems(*sub_, items, results, deadline);
     std::vector<MonitoredItem> out(items.size());
-    {
-        std::lock_guard lock(engine_->mutex());
-        for (std::size_t i = 0; i < items.size(); ++i) {
-            if (results[i].isBad()) continue;
-            sub_->items[items[i]->clientHandle] = items[i];
-            out[i].engine_ = engine_;
-            out[i].sub_ = sub_;
-            out[i].item_ = items[i];
-        }
+    for (std::size_t i = 0; i < items.size(); ++i) {
+        if (results[i].isBad()) continue;  // createItems() registered only the good ones
+        out[i].engine_ = engine_;
+        out[i].sub_ = sub_;
+        out[i].item_ = items[i];
     }
     if (statuses) *statuses = std::move(results);
     return out;
@@ -599,11 +614,7 @@ MonitoredItem Subscription::monitorEvents(const NodeId& notifier, EventOptions o
     engine_->createItems(*sub_, {item}, statuses, deadline);
     if (statuses.front().isBad())
         throw Error(statuses.front(), "CreateMonitoredItems (events) of " + notifier.toString());
-    MonitoredItem out;
-    {
-        std::lock_guard lock(engine_->mutex());
-        sub_->items[item->clientHandle] = item;
-    }
+    MonitoredItem out;  // registered by createItems()
     out.engine_ = engine_;
     out.sub_ = sub_;
     out.item_ = std::move(item);

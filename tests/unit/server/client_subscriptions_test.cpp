@@ -1,0 +1,157 @@
+// Our client's subscription API against our server (both ends of OPC 10000-4 §5.12/§5.13
+// over real sockets): data changes from setValue and from Write, events with standard and
+// custom fields, and a dropped connection that the client re-establishes.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "support/tcp_relay.hpp"
+#include "ua/client/client.hpp"
+#include "ua/client/subscription.hpp"
+#include "ua/server/server.hpp"
+#include "ua/types/ns0_ids.hpp"
+
+using namespace pnp::ua;
+using namespace std::chrono_literals;
+
+namespace {
+
+// Values delivered to callbacks (on the client's background thread), waited for with a
+// deadline.
+template <class T>
+class Inbox {
+  public:
+    void put(T v) {
+        std::lock_guard lock(m_);
+        items_.push_back(std::move(v));
+        cv_.notify_all();
+    }
+    // Waits until pred(items) holds or the timeout passes; returns pred's last result.
+    template <class Pred>
+    bool waitFor(Pred pred, std::chrono::milliseconds timeout = 5s) {
+        std::unique_lock lock(m_);
+        return cv_.wait_for(lock, timeout, [&] { return pred(items_); });
+    }
+    std::vector<T> items() {
+        std::lock_guard lock(m_);
+        return items_;
+    }
+
+  private:
+    std::mutex m_;
+    std::condition_variable cv_;
+    std::vector<T> items_;
+};
+
+// A server with an Int32 variable ns=1;s=Value; the client connects through a relay whose
+// connections can be cut.
+struct Fixture {
+    server::Server server{[] {
+        server::ServerConfig c;
+        c.host = "127.0.0.1";
+        c.publicHost = "127.0.0.1";
+        c.port = 0;
+        return c;
+    }()};
+    std::unique_ptr<pnp::testing::TcpRelay> relay;
+    client::Client c;
+    NodeId value{1, "Value"};
+
+    Fixture() {
+        server::VariableAttributes a;
+        a.dataType = NodeId(0, ns0::Int32);
+        a.value = DataValue(Variant(Int32{0}));
+        a.accessLevel = server::access_level::CurrentRead | server::access_level::CurrentWrite;
+        server.addressSpace().addVariable(NodeId(0, ns0::ObjectsFolder), value,
+                                          QualifiedName{1, "Value"}, a);
+        server.start();
+        relay = std::make_unique<pnp::testing::TcpRelay>(server.port());
+        c.connect("opc.tcp://127.0.0.1:" + std::to_string(relay->port()));
+        c.startBackgroundThread();
+    }
+};
+
+bool hasInt(const std::vector<DataValue>& v, Int32 x) {
+    for (const auto& d : v)
+        if (d.value && d.value->scalar<Int32>() && *d.value->scalar<Int32>() == x) return true;
+    return false;
+}
+
+}  // namespace
+
+TEST(ClientSubscriptions, DataChangesFromSetValueAndWrite) {
+    Fixture f;
+    Inbox<DataValue> got;
+    client::Subscription sub(f.c, {.publishingInterval = 10});
+    EXPECT_GT(sub.revised().subscriptionId, 0u);
+    client::MonitoredItem item =
+        sub.monitorValue(f.value, [&](const DataValue& v) { got.put(v); }, {.samplingInterval = 0});
+    ASSERT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 0); })) << "initial value";
+
+    ASSERT_TRUE(f.server.addressSpace().setValue(f.value, DataValue(Variant(Int32{7}))).isGood());
+    EXPECT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 7); })) << "value set in the server";
+
+    EXPECT_TRUE(f.c.writeValue(f.value, Variant(Int32{9})).isGood());
+    EXPECT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 9); })) << "value written by a client";
+
+    // After remove() nothing more arrives for the item.
+    item.remove();
+    const std::size_t before = got.items().size();
+    ASSERT_TRUE(f.server.addressSpace().setValue(f.value, DataValue(Variant(Int32{11}))).isGood());
+    EXPECT_FALSE(got.waitFor([&](auto& v) { return v.size() > before; }, 300ms));
+}
+
+TEST(ClientSubscriptions, EventsWithStandardAndCustomFields) {
+    Fixture f;
+    Inbox<std::vector<Variant>> got;
+    client::Subscription sub(f.c, {.publishingInterval = 10});
+    client::MonitoredItem item =
+        sub.monitorEvents(NodeId(0, ns0::Server), {.select = {"Message", "Severity", "1:Custom"}},
+                          [&](client::EventFields& e) { got.put(e.take()); });
+
+    server::Event ev;
+    ev.message = LocalizedText("en", "gripper closed");
+    ev.severity = 321;
+    ev.set(QualifiedName{1, "Custom"}, Variant(Int32{42}));
+    f.server.fireEvent(ev);
+    ASSERT_TRUE(got.waitFor([](auto& v) { return !v.empty(); }));
+    const auto fields = got.items().front();
+    ASSERT_EQ(fields.size(), 3u);
+    ASSERT_NE(fields[0].scalar<LocalizedText>(), nullptr);
+    EXPECT_EQ(fields[0].scalar<LocalizedText>()->text, "gripper closed");
+    ASSERT_NE(fields[1].scalar<UInt16>(), nullptr);
+    EXPECT_EQ(*fields[1].scalar<UInt16>(), 321);
+    ASSERT_NE(fields[2].scalar<Int32>(), nullptr);
+    EXPECT_EQ(*fields[2].scalar<Int32>(), 42);
+}
+
+TEST(ClientSubscriptions, SurviveADroppedConnection) {
+    Fixture f;
+    Inbox<DataValue> got;
+    Inbox<client::SubscriptionStatus::Kind> status;
+    client::Subscription sub(f.c, {.publishingInterval = 10},
+                             [&](const client::SubscriptionStatus& s) { status.put(s.kind); });
+    client::MonitoredItem item =
+        sub.monitorValue(f.value, [&](const DataValue& v) { got.put(v); }, {.samplingInterval = 0});
+    ASSERT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 0); }));
+
+    // The connection is cut; the server keeps the session and the subscription.
+    f.relay->cut();
+    ASSERT_TRUE(status.waitFor(
+        [](auto& k) {
+            for (auto x : k)
+                if (x == client::SubscriptionStatus::Kind::Republished ||
+                    x == client::SubscriptionStatus::Kind::Recreated ||
+                    x == client::SubscriptionStatus::Kind::Transferred)
+                    return true;
+            return false;
+        },
+        10s));
+    ASSERT_TRUE(f.server.addressSpace().setValue(f.value, DataValue(Variant(Int32{5}))).isGood());
+    EXPECT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 5); }, 10s));
+}
