@@ -17,6 +17,7 @@
 #include <atomic>
 #include <cinttypes>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -24,6 +25,7 @@
 #include <functional>
 #include <iostream>
 #include <map>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -32,6 +34,7 @@
 
 #include "bench_util.hpp"
 #include "ua/client/client.hpp"
+#include "ua/client/subscription.hpp"
 #include "ua/types/ns0_ids.hpp"
 
 extern char** environ;
@@ -57,7 +60,7 @@ struct Options {
     std::string pnpExe;           // `pnp` binary
     std::string helperDir;        // pnp_bench_* binaries
     std::string jsonPath;
-    std::string sections = "abcd";
+    std::string sections = "abcde";
     bool quiet = false;
     bool skipRaw = false;   // profiling: OPC UA round trips only
     int realtimeMode = -1;  // -1 auto, 0 off, 1 on
@@ -76,7 +79,8 @@ void usage() {
         "  --sizes 2,4,...         payload sizes in bytes (default 2..32768, powers of two)\n"
         "  --start-runs N          runs of (c) (default 30)\n"
         "  --listen-runs N         runs of (d) (default 10)\n"
-        "  --only abcd             sections to run (default abcd)\n"
+        "  --only abcde            sections to run (default abcde; e: value change -> data-change\n"
+        "                          callback of a subscription)\n"
         "  --realtime | --no-realtime\n"
         "                          SCHED_FIFO (priority 10) for every benchmark process, or not.\n"
         "                          Default (auto): on when running as root and the 1-minute load\n"
@@ -390,6 +394,8 @@ struct Results {
         long threads = 0;
     };
     std::vector<Idle> idle;
+    // (e)
+    Summary change, changeRaw;
 };
 
 void printRttTable(const char* title, const std::vector<RttRow>& rows, const Options& o) {
@@ -737,6 +743,73 @@ int run(Options o) {
         }
     }
 
+    // ---- (e) value change in the server -> data-change callback in the client ---------------
+    if (o.sections.find('e') != std::string::npos) {
+        constexpr int kTickMs = 15;  // > the minimum publishing interval (10 ms): no batching
+        const std::size_t changes = std::max<std::size_t>(200, o.iterations / 4);
+        const std::size_t warm = 20;
+        ServerProcess ticker("ticker",
+                             {o.helperDir + "/pnp_bench_server", "--host", "127.0.0.1", "--port",
+                              "0", "--ticker", std::to_string(kTickMs)},
+                             o.serverCpu, o.realtime);
+        ServerProcess echoServer("echo", {echoExe, "--port", "0", "--max-payload", "64"},
+                                 o.serverCpu, o.realtime);
+        RawClient raw(echoServer.port());
+        raw.prepare(8, 3);
+        std::vector<double> rawNs, changeNs;
+        for (std::size_t i = 0; i < o.warmup; ++i) raw.roundTrip(false);
+        for (std::size_t i = 0; i < o.iterations / 2; ++i) rawNs.push_back(raw.roundTrip(false));
+        {
+            ua::client::Client client;
+            client.connect(opcUrl(ticker.port()));
+            const ua::NodeId tickerId(client.namespaceIndex("urn:pnp:demo"), "Bench.Ticker");
+            std::mutex m;
+            std::condition_variable cv;
+            ua::client::Subscription sub(client, {.publishingInterval = 10});
+            ua::client::MonitoredItem item = sub.monitorValue(
+                tickerId,
+                [&](const ua::DataValue& v) {
+                    const std::int64_t now = nowNs();
+                    const ua::Int64* t = v.value ? v.value->scalar<ua::Int64>() : nullptr;
+                    if (t == nullptr || *t == 0) return;  // the initial value
+                    std::lock_guard lock(m);
+                    changeNs.push_back(static_cast<double>(now - *t));
+                    cv.notify_all();
+                },
+                {.samplingInterval = 0});
+            client.startBackgroundThread();
+            std::unique_lock lock(m);
+            const bool complete =
+                cv.wait_for(lock, std::chrono::milliseconds(kTickMs * (changes + warm) * 3 + 5000),
+                            [&] { return changeNs.size() >= changes + warm; });
+            lock.unlock();
+            client.stopBackgroundThread();
+            if (!complete)
+                throw std::runtime_error("(e): " + std::to_string(changeNs.size()) + " of " +
+                                         std::to_string(changes + warm) +
+                                         " value changes arrived in time");
+        }
+        for (std::size_t i = 0; i < o.iterations / 2; ++i) rawNs.push_back(raw.roundTrip(false));
+        changeNs.erase(changeNs.begin(), changeNs.begin() + warm);
+        for (auto& x : changeNs) x /= 1000.0;
+        for (auto& x : rawNs) x /= 1000.0;
+        res.change = summarize(changeNs);
+        res.changeRaw = summarize(rawNs);
+        std::printf(
+            "\n(e) value change in the server (setValue, sampling interval 0) -> data-change "
+            "callback in the client\n  (µs; %zu changes every %d ms, Int64 = CLOCK_MONOTONIC "
+            "before "
+            "setValue; raw TCP echo of 8 bytes, %zu round trips before and after)\n",
+            res.change.n, kTickMs, res.changeRaw.n);
+        std::printf("  change -> callback  median %7.1f  p99 %7.1f\n", res.change.median,
+                    res.change.p99);
+        std::printf("  raw TCP round trip  median %7.1f  p99 %7.1f\n", res.changeRaw.median,
+                    res.changeRaw.p99);
+        std::printf("  ratio %.2f  %s\n", res.change.median / res.changeRaw.median,
+                    res.change.median <= 1.2 * res.changeRaw.median ? "ok" : "MISS");
+        std::fflush(stdout);
+    }
+
     if (o.sections.find('d') != std::string::npos) {
         std::printf(
             "\n(d) idle server: spawn -> accepting, and VmRSS after one session came and went"
@@ -808,6 +881,10 @@ int run(Options o) {
     if (!res.call.empty())
         std::printf("  Call:  worst median ratio %.2f  %s\n", worst(res.call),
                     worst(res.call) <= 1.2 ? "ok" : "MISS");
+    if (res.change.n > 0)
+        std::printf("  value change -> callback: %.1f µs, %.2f × raw TCP RTT  %s\n",
+                    res.change.median, res.change.median / res.changeRaw.median,
+                    res.change.median <= 1.2 * res.changeRaw.median ? "ok" : "MISS");
     if (res.haveStart)
         std::printf("  first Read: %.0f µs in-process, %.0f µs from spawn  %s / %s\n",
                     res.inproc.median, res.exec.median, res.inproc.median <= 1000 ? "ok" : "MISS",
@@ -858,6 +935,10 @@ int run(Options o) {
                  ",\"threads\":" + std::to_string(d.threads) + "}";
         }
         j += "]";
+    }
+    if (res.change.n > 0) {
+        j += ",\"value_change_us\":" + summaryJson(res.change) +
+             ",\"value_change_raw_rtt_us\":" + summaryJson(res.changeRaw);
     }
     j += ",\"targets\":{\"rtt_ratio_max\":1.2,\"first_read_us_max\":1000,\"idle_rss_kb_max\":8192,"
          "\"accepting_ms_max\":100}}";

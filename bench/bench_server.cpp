@@ -2,31 +2,41 @@
 // anonymous access) built only on pnp_ua_server + pnp_ua_demo, without the CLI. Used by the
 // benchmark with --server bench (and to tell what the CLI itself adds to start-up and RSS).
 //
-//   pnp_bench_server [--host 127.0.0.1] [--port N]
+//   pnp_bench_server [--host 127.0.0.1] [--port N] [--ticker MS]
+//
+// --ticker MS: a variable ns=<demo>;s=Bench.Ticker (Int64) set every MS ms by a thread of
+// its own (AddressSpace::setValue) to CLOCK_MONOTONIC in ns taken just before the call: a
+// subscriber in another process on this machine computes "value change -> callback" from it.
 //
 // Prints "listening on opc.tcp://HOST:PORT" (flushed) once accepting; stops on SIGINT/SIGTERM.
 #include <pthread.h>
 #include <signal.h>
 
+#include <chrono>
 #include <cstdio>
 #include <exception>
 #include <string>
+#include <thread>
 
 #include "ua/demo/demo.hpp"
 #include "ua/server/server.hpp"
+#include "ua/types/ns0_ids.hpp"
 
 int main(int argc, char** argv) {
     using namespace pnp::ua;
     std::string host = "127.0.0.1";
     int port = 0;
+    int tickerMs = 0;
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
         if (a == "--host" && i + 1 < argc)
             host = argv[++i];
         else if (a == "--port" && i + 1 < argc)
             port = std::stoi(argv[++i]);
+        else if (a == "--ticker" && i + 1 < argc)
+            tickerMs = std::stoi(argv[++i]);
         else {
-            std::fprintf(stderr, "usage: %s [--host ADDR] [--port N]\n", argv[0]);
+            std::fprintf(stderr, "usage: %s [--host ADDR] [--port N] [--ticker MS]\n", argv[0]);
             return 2;
         }
     }
@@ -42,11 +52,38 @@ int main(int argc, char** argv) {
         config.port = static_cast<UInt16>(port);
         server::Server server(config);
         demo::DemoNamespace demoNamespace(server);
+        NodeId tickerId;
+        if (tickerMs > 0) {
+            const UInt16 ns = server.addNamespace("urn:pnp:demo");
+            server::VariableAttributes a;
+            a.dataType = NodeId(0, ns0::Int64);
+            a.value = DataValue(Variant(Int64{0}));
+            tickerId = server.addressSpace().addVariable(NodeId(0, ns0::ObjectsFolder),
+                                                         NodeId(ns, "Bench.Ticker"),
+                                                         QualifiedName{ns, "Bench.Ticker"}, a);
+        }
         server.start();
+        std::jthread ticker;
+        if (tickerMs > 0) {
+            ticker = std::jthread([&](std::stop_token stopToken) {
+                while (!stopToken.stop_requested()) {
+                    std::this_thread::sleep_for(std::chrono::milliseconds(tickerMs));
+                    const auto now = std::chrono::steady_clock::now().time_since_epoch();
+                    server.addressSpace().setValue(
+                        tickerId,
+                        DataValue(Variant(Int64{
+                            std::chrono::duration_cast<std::chrono::nanoseconds>(now).count()})));
+                }
+            });
+        }
         std::printf("listening on %s\n", server.endpointUrl().c_str());
         std::fflush(stdout);
         int sig = 0;
         while (sigwait(&stop, &sig) != 0) {
+        }
+        if (ticker.joinable()) {
+            ticker.request_stop();
+            ticker.join();
         }
         server.stop();
     } catch (const std::exception& e) {
