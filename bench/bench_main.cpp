@@ -53,6 +53,7 @@ struct Options {
     std::size_t block = 100;         // OPC UA and raw alternate in blocks of this many
     std::size_t startRuns = 30;      // (c)
     std::size_t listenRuns = 10;     // (d)
+    int tickMs = 15;                 // (e): a value change every tickMs
     int serverCpu = 0;
     int clientCpu = 0;
     bool realtime = false;        // SCHED_FIFO for every benchmark process (decided in run())
@@ -79,6 +80,7 @@ void usage() {
         "  --sizes 2,4,...         payload sizes in bytes (default 2..32768, powers of two)\n"
         "  --start-runs N          runs of (c) (default 30)\n"
         "  --listen-runs N         runs of (d) (default 10)\n"
+        "  --tick-ms N             (e): a value change every N ms (default 15; 2..1000)\n"
         "  --only abcde            sections to run (default abcde; e: value change -> data-change\n"
         "                          callback of a subscription)\n"
         "  --realtime | --no-realtime\n"
@@ -318,6 +320,24 @@ class RawClient {
             throw std::runtime_error("raw echo: payload differs");
         return static_cast<double>(t1 - t0);
     }
+    // One-way latencies (ns) of `count` timestamps the echo server sends every `periodMs`
+    // (its TICK request): sender's clock before send() -> here after the receive.
+    std::vector<double> ticks(std::uint32_t periodMs, std::uint32_t count) {
+        unsigned char req[16] = {12, 0, 0, 0, 'T', 'I', 'C', 'K'};
+        std::memcpy(req + 8, &periodMs, 4);
+        std::memcpy(req + 12, &count, 4);
+        if (!sendAll(fd_, req, sizeof req)) fail("raw echo: send TICK");
+        std::vector<double> out;
+        std::vector<unsigned char> frame;
+        for (std::uint32_t i = 0; i < count; ++i) {
+            if (recvFrame(fd_, frame, 8) != 8) throw std::runtime_error("raw echo: bad tick");
+            const std::int64_t t1 = nowNs();
+            std::int64_t t0 = 0;
+            std::memcpy(&t0, frame.data() + 4, 8);
+            out.push_back(static_cast<double>(t1 - t0));
+        }
+        return out;
+    }
 
   private:
     int fd_ = -1;
@@ -395,7 +415,7 @@ struct Results {
     };
     std::vector<Idle> idle;
     // (e)
-    Summary change, changeRaw;
+    Summary change, changeRaw, changeRawBackToBack, changeRawTick;
 };
 
 void printRttTable(const char* title, const std::vector<RttRow>& rows, const Options& o) {
@@ -745,7 +765,9 @@ int run(Options o) {
 
     // ---- (e) value change in the server -> data-change callback in the client ---------------
     if (o.sections.find('e') != std::string::npos) {
-        constexpr int kTickMs = 15;  // > the minimum publishing interval (10 ms): no batching
+        // Changes every kTickMs (default 15) > the publishing interval: none waits for a cycle.
+        const int kTickMs = o.tickMs;
+        const double publishingMs = kTickMs > 10 ? 10.0 : std::max(1.0, kTickMs - 1.0);
         const std::size_t changes = std::max<std::size_t>(200, o.iterations / 4);
         const std::size_t warm = 20;
         ServerProcess ticker("ticker",
@@ -756,16 +778,30 @@ int run(Options o) {
                                  o.serverCpu, o.realtime);
         RawClient raw(echoServer.port());
         raw.prepare(8, 3);
-        std::vector<double> rawNs, changeNs;
+        // Baselines, half before and half after the subscription: back-to-back round trips
+        // (both ends busy), round trips paced like the changes (both ends idle in between, as
+        // a subscriber always is: a publishing interval is >= 10 ms) and one-way ticks from a
+        // thread of the echo server every kTickMs (the raw analog of the measured path).
+        std::vector<double> rawNs, pacedNs, tickNs, changeNs;
+        auto baselines = [&] {
+            for (std::size_t i = 0; i < o.iterations / 2; ++i)
+                rawNs.push_back(raw.roundTrip(false));
+            for (std::size_t i = 0; i < changes / 2; ++i) {
+                std::this_thread::sleep_for(std::chrono::milliseconds(kTickMs));
+                pacedNs.push_back(raw.roundTrip(false));
+            }
+            auto t = raw.ticks(kTickMs, static_cast<std::uint32_t>(changes / 2 + 2));
+            tickNs.insert(tickNs.end(), t.begin() + 2, t.end());
+        };
         for (std::size_t i = 0; i < o.warmup; ++i) raw.roundTrip(false);
-        for (std::size_t i = 0; i < o.iterations / 2; ++i) rawNs.push_back(raw.roundTrip(false));
+        baselines();
         {
             ua::client::Client client;
             client.connect(opcUrl(ticker.port()));
             const ua::NodeId tickerId(client.namespaceIndex("urn:pnp:demo"), "Bench.Ticker");
             std::mutex m;
             std::condition_variable cv;
-            ua::client::Subscription sub(client, {.publishingInterval = 10});
+            ua::client::Subscription sub(client, {.publishingInterval = publishingMs});
             ua::client::MonitoredItem item = sub.monitorValue(
                 tickerId,
                 [&](const ua::DataValue& v) {
@@ -789,22 +825,29 @@ int run(Options o) {
                                          std::to_string(changes + warm) +
                                          " value changes arrived in time");
         }
-        for (std::size_t i = 0; i < o.iterations / 2; ++i) rawNs.push_back(raw.roundTrip(false));
+        baselines();
         changeNs.erase(changeNs.begin(), changeNs.begin() + warm);
-        for (auto& x : changeNs) x /= 1000.0;
-        for (auto& x : rawNs) x /= 1000.0;
+        for (auto* v : {&changeNs, &rawNs, &pacedNs, &tickNs})
+            for (auto& x : *v) x /= 1000.0;
         res.change = summarize(changeNs);
-        res.changeRaw = summarize(rawNs);
+        res.changeRaw = summarize(pacedNs);
+        res.changeRawBackToBack = summarize(rawNs);
+        res.changeRawTick = summarize(tickNs);
         std::printf(
             "\n(e) value change in the server (setValue, sampling interval 0) -> data-change "
             "callback in the client\n  (µs; %zu changes every %d ms, Int64 = CLOCK_MONOTONIC "
-            "before "
-            "setValue; raw TCP echo of 8 bytes, %zu round trips before and after)\n",
-            res.change.n, kTickMs, res.changeRaw.n);
-        std::printf("  change -> callback  median %7.1f  p99 %7.1f\n", res.change.median,
-                    res.change.p99);
-        std::printf("  raw TCP round trip  median %7.1f  p99 %7.1f\n", res.changeRaw.median,
-                    res.changeRaw.p99);
+            "before setValue; raw TCP, 8 bytes, half before and half after)\n",
+            res.change.n, kTickMs);
+        auto row = [&](const char* label, const Summary& x, bool ratio) {
+            std::printf("  %-46s median %7.1f  p99 %7.1f", label, x.median, x.p99);
+            if (ratio) std::printf("  | change/this %.2f", res.change.median / x.median);
+            std::printf("\n");
+        };
+        row("change -> callback", res.change, false);
+        const std::string every = " every " + std::to_string(kTickMs) + " ms";
+        row(("raw RTT, one" + every + " (baseline)").c_str(), res.changeRaw, true);
+        row(("raw one-way tick" + every + " (info)").c_str(), res.changeRawTick, true);
+        row("raw RTT back to back (info)", res.changeRawBackToBack, true);
         std::printf("  ratio %.2f  %s\n", res.change.median / res.changeRaw.median,
                     res.change.median <= 1.2 * res.changeRaw.median ? "ok" : "MISS");
         std::fflush(stdout);
@@ -882,7 +925,7 @@ int run(Options o) {
         std::printf("  Call:  worst median ratio %.2f  %s\n", worst(res.call),
                     worst(res.call) <= 1.2 ? "ok" : "MISS");
     if (res.change.n > 0)
-        std::printf("  value change -> callback: %.1f µs, %.2f × raw TCP RTT  %s\n",
+        std::printf("  value change -> callback: %.1f µs, %.2f × raw TCP RTT paced alike  %s\n",
                     res.change.median, res.change.median / res.changeRaw.median,
                     res.change.median <= 1.2 * res.changeRaw.median ? "ok" : "MISS");
     if (res.haveStart)
@@ -938,7 +981,9 @@ int run(Options o) {
     }
     if (res.change.n > 0) {
         j += ",\"value_change_us\":" + summaryJson(res.change) +
-             ",\"value_change_raw_rtt_us\":" + summaryJson(res.changeRaw);
+             ",\"value_change_raw_rtt_us\":" + summaryJson(res.changeRaw) +
+             ",\"value_change_raw_tick_us\":" + summaryJson(res.changeRawTick) +
+             ",\"value_change_raw_back_to_back_rtt_us\":" + summaryJson(res.changeRawBackToBack);
     }
     j += ",\"targets\":{\"rtt_ratio_max\":1.2,\"first_read_us_max\":1000,\"idle_rss_kb_max\":8192,"
          "\"accepting_ms_max\":100}}";
@@ -1001,6 +1046,8 @@ int main(int argc, char** argv) {
                 o.startRuns = std::stoul(next());
             } else if (a == "--listen-runs") {
                 o.listenRuns = std::stoul(next());
+            } else if (a == "--tick-ms") {
+                o.tickMs = std::clamp(std::stoi(next()), 2, 1000);
             } else if (a == "--only") {
                 o.sections = next();
             } else if (a == "--realtime") {

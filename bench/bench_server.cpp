@@ -50,6 +50,9 @@ int main(int argc, char** argv) {
         config.host = host;
         config.publicHost = host;
         config.port = static_cast<UInt16>(port);
+        // Section (e) also runs with changes every few ms (--tick-ms): allow publishing
+        // intervals down to 1 ms (the product default stays 10 ms).
+        if (tickerMs > 0) config.subscriptionLimits.minPublishingIntervalMs = 1;
         server::Server server(config);
         demo::DemoNamespace demoNamespace(server);
         NodeId tickerId;

@@ -3,6 +3,11 @@
 // sent back unchanged with one send() call. TCP_NODELAY on every accepted socket, one thread
 // per connection, no event loop: the cheapest honest request/response over TCP.
 //
+// A frame whose payload is "TICK" + u32 period ms + u32 count (little-endian) is not echoed:
+// the thread sleeps `period` ms, then sends an 8-byte frame with CLOCK_MONOTONIC in ns taken
+// just before the send, `count` times — the raw analog of a value changed in a server every
+// `period` ms and reported to an idle client (benchmark section (e)).
+//
 //   pnp_bench_echo_server [--port N] [--max-payload BYTES]
 //
 // Prints "listening on 127.0.0.1:PORT" (flushed) once accepting; stops on SIGTERM/SIGINT
@@ -12,6 +17,9 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -26,11 +34,31 @@ using namespace pnp::bench;
 
 namespace {
 
+bool sendTicks(int fd, const unsigned char* request) {
+    std::uint32_t periodMs = 0, count = 0;
+    std::memcpy(&periodMs, request + 4, 4);
+    std::memcpy(&count, request + 8, 4);
+    periodMs = std::min<std::uint32_t>(periodMs, 10'000);
+    count = std::min<std::uint32_t>(count, 100'000);
+    unsigned char frame[12] = {8, 0, 0, 0};
+    for (std::uint32_t i = 0; i < count; ++i) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(periodMs));
+        const std::int64_t t = nowNs();
+        std::memcpy(frame + 4, &t, 8);
+        if (!sendAll(fd, frame, sizeof frame)) return false;
+    }
+    return true;
+}
+
 void serveConnection(int fd, std::size_t maxPayload) {
     std::vector<unsigned char> buf;
     for (;;) {
         long n = recvFrame(fd, buf, maxPayload);
         if (n < 0) break;
+        if (n == 12 && std::memcmp(buf.data() + 4, "TICK", 4) == 0) {
+            if (!sendTicks(fd, buf.data() + 4)) break;
+            continue;
+        }
         if (!sendAll(fd, buf.data(), 4 + static_cast<std::size_t>(n))) break;
     }
     ::close(fd);

@@ -563,7 +563,8 @@ class Client::Impl {
     }
 
     // One pass of the event loop: returns when the loop should run again at the latest.
-    Clock::time_point housekeeping(Completions& done) {
+    // `readable`: poll() reported data on the socket (read it once, without waiting).
+    Clock::time_point housekeeping(Completions& done, bool readable) {
         Clock::time_point now = Clock::now();
         expireAsync(now, done);
         if (wantConnected && config.reconnect.enabled && (!conn || sessionInvalid) &&
@@ -582,7 +583,8 @@ class Client::Impl {
         }
         if (conn) {
             try {
-                while (auto m = conn->receive(now)) {
+                bool read = readable;
+                while (auto m = conn->receiveReady(std::exchange(read, false))) {
                     lastReceive = now;
                     route(std::move(*m), done);
                 }
@@ -638,7 +640,7 @@ class Client::Impl {
     // data only while async requests are pending (so that blocking calls, which read their
     // responses themselves, do not wake it).
     void backgroundLoop() {
-        short hangup = 0;
+        short revents = 0;  // of the socket, from the last poll()
         std::uint64_t watched = 0;
         for (;;) {
             Completions done;
@@ -648,8 +650,8 @@ class Client::Impl {
             {
                 std::lock_guard lock(mutex);
                 if (stopRequested) return;
-                if (hangup) peerHungUp(watched, done);
-                until = housekeeping(done);
+                if (revents & (POLLRDHUP | POLLHUP | POLLERR)) peerHungUp(watched, done);
+                until = housekeeping(done, (revents & POLLIN) && watched == generation);
                 if (conn) {
                     fd = conn->nativeHandle();
                     events = pending.empty() ? POLLRDHUP : (POLLIN | POLLRDHUP);
@@ -657,7 +659,7 @@ class Client::Impl {
                 }
             }
             done.run();
-            hangup = waitForEvents(fd, events, until) & (POLLRDHUP | POLLHUP | POLLERR);
+            revents = waitForEvents(fd, events, until);
         }
     }
 
@@ -1204,7 +1206,7 @@ std::size_t Client::runIterate(milliseconds timeout) {
     Impl& s = *impl_;
     Clock::time_point end = Clock::now() + timeout;
     std::size_t n = 0;
-    short hangup = 0;
+    short revents = 0;  // of the socket, from the last poll()
     std::uint64_t watched = 0;
     for (;;) {
         Clock::time_point until;
@@ -1214,8 +1216,8 @@ std::size_t Client::runIterate(milliseconds timeout) {
             {
                 std::lock_guard lock(s.mutex);
                 s.ensureWakeFd();
-                if (hangup) s.peerHungUp(watched, done);
-                until = s.housekeeping(done);
+                if (revents & (POLLRDHUP | POLLHUP | POLLERR)) s.peerHungUp(watched, done);
+                until = s.housekeeping(done, (revents & POLLIN) && watched == s.generation);
                 if (s.conn) {
                     fd = s.conn->nativeHandle();
                     watched = s.generation;
@@ -1224,8 +1226,7 @@ std::size_t Client::runIterate(milliseconds timeout) {
             n += done.run();
         }
         if (n > 0 || Clock::now() >= end) return n;
-        hangup = s.waitForEvents(fd, POLLIN | POLLRDHUP, std::min(end, until)) &
-                 (POLLRDHUP | POLLHUP | POLLERR);
+        revents = s.waitForEvents(fd, POLLIN | POLLRDHUP, std::min(end, until));
     }
 }
 

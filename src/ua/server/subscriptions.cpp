@@ -583,21 +583,24 @@ struct SubscriptionEngine::Impl {
         r.results = std::move(p.ackResults);
         bool more = false;
         if (!keepAlive) r.notificationMessage = buildMessage(s, more);
-        if (r.notificationMessage.notificationData.empty()) {
-            // Keep-alive: the next sequence number, not consumed (§5.13.1.1).
-            r.notificationMessage.sequenceNumber = s.nextSequenceNumber;
-            r.notificationMessage.publishTime = DateTime::now();
-        } else {
-            r.notificationMessage.sequenceNumber = s.nextSequenceNumber;
+        const bool keptForRepublish = !r.notificationMessage.notificationData.empty();
+        r.notificationMessage.sequenceNumber = s.nextSequenceNumber;
+        if (keptForRepublish) {
             s.nextSequenceNumber =
                 s.nextSequenceNumber == 0xFFFFFFFFu ? 1 : s.nextSequenceNumber + 1;
-            s.retransmission.push_back(r.notificationMessage);
-            while (s.retransmission.size() > limits.maxRetransmissionQueue)
+            while (s.retransmission.size() >= limits.maxRetransmissionQueue &&
+                   !s.retransmission.empty())
                 s.retransmission.pop_front();
+        } else {
+            // Keep-alive: the next sequence number, not consumed (§5.13.1.1).
+            r.notificationMessage.publishTime = DateTime::now();
         }
         r.moreNotifications = more;
+        r.availableSequenceNumbers.reserve(s.retransmission.size() + 1);
         for (const auto& m : s.retransmission)
             r.availableSequenceNumbers.push_back(m.sequenceNumber);
+        if (keptForRepublish && limits.maxRetransmissionQueue > 0)
+            r.availableSequenceNumbers.push_back(r.notificationMessage.sequenceNumber);
         s.keepAliveCounter = 0;
         s.lifetimeCounter = 0;
         s.lastMessage = now;
@@ -605,6 +608,9 @@ struct SubscriptionEngine::Impl {
         s.late = more;
         ++messagesSent;
         sendResponse(*p.conn, p.requestId, p.requestHandle, r);
+        // Kept after sending (moved, not copied: the change reaches the wire first).
+        if (keptForRepublish && limits.maxRetransmissionQueue > 0)
+            s.retransmission.push_back(std::move(r.notificationMessage));
     }
 
     // One publishing cycle of `s` (§5.13.1.2, simplified state machine). Returns false when

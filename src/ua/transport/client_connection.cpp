@@ -356,14 +356,7 @@ UInt32 ClientConnection::send(Buffer&& message, Splices&& splices, Deadline dead
 
 std::optional<IncomingResponse> ClientConnection::receive(Deadline deadline) {
     for (;;) {
-        if (readyHead_ < ready_.size()) {
-            IncomingResponse r = std::move(ready_[readyHead_++]);
-            if (readyHead_ == ready_.size()) {
-                ready_.clear();
-                readyHead_ = 0;
-            }
-            return r;
-        }
+        if (readyHead_ < ready_.size()) return receiveReady(false);
         if (!isOpen()) throw TransportError(status::BadConnectionClosed, "connection closed");
         renewIfDue();
         Deadline wake = deadline;
@@ -373,6 +366,17 @@ std::optional<IncomingResponse> ClientConnection::receive(Deadline deadline) {
             return std::nullopt;
         }
     }
+}
+
+std::optional<IncomingResponse> ClientConnection::receiveReady(bool readable) {
+    if (readyHead_ == ready_.size() && readable && isOpen()) readOnce(TimePoint::min());
+    if (readyHead_ == ready_.size()) return std::nullopt;
+    IncomingResponse r = std::move(ready_[readyHead_++]);
+    if (readyHead_ == ready_.size()) {
+        ready_.clear();
+        readyHead_ = 0;
+    }
+    return r;
 }
 
 bool ClientConnection::renewIfDue() {

@@ -82,6 +82,12 @@ class ClientConnection final : private ClientChannel::Hooks {
     // receive(), send(), drainAvailable() or close(); body.own() keeps it longer.
     std::optional<IncomingResponse> receive(Deadline deadline);
 
+    // For an event loop that polled the socket: `readable` (poll reported POLLIN) reads once
+    // without waiting, then the responses already received are handed out one per call. No
+    // readiness check of its own: one system call per wake-up (poll is level-triggered, so
+    // bytes left in the socket wake the loop again). Same body lifetime as receive().
+    std::optional<IncomingResponse> receiveReady(bool readable);
+
     // Sends the renew request when due (see above). True when one was sent.
     bool renewIfDue();
     TimePoint renewalDue() const { return channel_.renewalDue(); }

@@ -20,6 +20,7 @@ ExtensionObject toExtensionObject(const T& v) {
     x.typeId = NodeId(0, DataTypeInfo<T>::binaryEncodingId);
     x.encoding = ExtensionObject::Encoding::Binary;
     Buffer b;
+    b.reserve(256);  // most bodies fit: one allocation instead of a doubling series
     BinaryEncoder e(b);
     encode(e, v);
     x.body.assign(reinterpret_cast<const char*>(b.data()), b.size());
