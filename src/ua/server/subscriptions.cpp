@@ -307,10 +307,37 @@ struct PendingPublish {
     TimePoint deadline = TimePoint::max();
 };
 
+// A StatusChangeNotification for a subscription that left its session (transferred or
+// expired), waiting for the session's next Publish request.
+struct StatusNotice {
+    UInt32 subscriptionId = 0;
+    UInt32 sequenceNumber = 0;
+    StatusCode status;
+};
+
 struct SessionState {
     std::deque<PendingPublish> publishes;
     std::vector<UInt32> subscriptions;
+    std::deque<StatusNotice> notices;  // at most maxSubscriptionsPerSession
+    SessionIdentity user;
+    bool closed = false;  // the session ended; its subscriptions wait for a transfer
 };
+
+bool sameUser(const SessionIdentity& a, const SessionIdentity& b) {
+    return a.anonymous == b.anonymous && (a.anonymous || a.userName == b.userName);
+}
+
+// The timestamps a monitored item returns (TimestampsToReturn).
+void keepTimestamps(DataValue& v, TimestampsToReturn ts) {
+    if (ts != TimestampsToReturn::Source && ts != TimestampsToReturn::Both) {
+        v.sourceTimestamp.reset();
+        v.sourcePicoseconds.reset();
+    }
+    if (ts != TimestampsToReturn::Server && ts != TimestampsToReturn::Both) {
+        v.serverTimestamp.reset();
+        v.serverPicoseconds.reset();
+    }
+}
 
 struct SamplingGroup {
     TimePoint next;
@@ -426,9 +453,24 @@ struct SubscriptionEngine::Impl {
         Subscription& s = *it->second;
         for (auto& [_, item] : s.items) detach(*item);
         itemCount -= s.items.size();
-        auto st = sessions.find(s.session);
-        if (st != sessions.end()) std::erase(st->second.subscriptions, id);
+        const NodeId session = s.session;
         subscriptions.erase(it);
+        leave(session, id);
+    }
+    // Subscription `id` left `session` (deleted or transferred).
+    void leave(const NodeId& session, UInt32 id) {
+        auto st = sessions.find(session);
+        if (st == sessions.end()) return;
+        std::erase(st->second.subscriptions, id);
+        if (st->second.closed && st->second.subscriptions.empty()) sessions.erase(st);
+    }
+    // Publish requests of a session without subscriptions would wait forever.
+    void releasePublishes(const NodeId& session) {
+        auto st = sessions.find(session);
+        if (st == sessions.end() || !st->second.subscriptions.empty()) return;
+        for (auto& p : st->second.publishes)
+            p.conn->sendServiceFault(p.requestId, p.requestHandle, status::BadNoSubscription);
+        st->second.publishes.clear();
     }
 
     bool changed(const MonitoredItem& item, const DataValue& old, const DataValue& now) const {
@@ -463,15 +505,7 @@ struct SubscriptionEngine::Impl {
             if (!changed(*item, *item->last, v)) return false;
         }
         item->last = v;
-        const auto ts = item->timestamps;
-        if (ts != TimestampsToReturn::Source && ts != TimestampsToReturn::Both) {
-            v.sourceTimestamp.reset();
-            v.sourcePicoseconds.reset();
-        }
-        if (ts != TimestampsToReturn::Server && ts != TimestampsToReturn::Both) {
-            v.serverTimestamp.reset();
-            v.serverPicoseconds.reset();
-        }
+        keepTimestamps(v, item->timestamps);
         auto& q = item->values;
         if (q.size() >= item->queueSize) {
             if (item->queueSize == 1) {
@@ -528,6 +562,69 @@ struct SubscriptionEngine::Impl {
     bool publishAvailable(const NodeId& session) const {
         auto it = sessions.find(session);
         return it != sessions.end() && !it->second.publishes.empty();
+    }
+
+    // Answers `p` with a StatusChangeNotification of a subscription that left the session.
+    void sendNotice(PendingPublish& p, const StatusNotice& n) {
+        PublishResponse r;
+        r.subscriptionId = n.subscriptionId;
+        r.results = std::move(p.ackResults);
+        r.notificationMessage.sequenceNumber = n.sequenceNumber;
+        r.notificationMessage.publishTime = DateTime::now();
+        StatusChangeNotification sc;
+        sc.status = n.status;
+        r.notificationMessage.notificationData.push_back(toExtensionObject(sc));
+        ++messagesSent;
+        sendResponse(*p.conn, p.requestId, p.requestHandle, r);
+    }
+    // Tells an open session that subscription `s` left it (§7.20.4): on a queued Publish
+    // request at once, otherwise on the next one.
+    void notify(const NodeId& session, const Subscription& s, StatusCode status, TimePoint now) {
+        auto st = sessions.find(session);
+        if (st == sessions.end() || st->second.closed) return;
+        StatusNotice n{s.id, s.nextSequenceNumber, status};
+        if (auto p = takePublish(session, now)) {
+            sendNotice(*p, n);
+            return;
+        }
+        auto& q = st->second.notices;
+        if (q.size() >= limits.maxSubscriptionsPerSession) q.pop_front();
+        q.push_back(n);
+    }
+
+    // The lifetime of subscription `id` ran out (§5.13.1.2): its session, while open, gets a
+    // StatusChangeNotification Bad_Timeout, and the subscription is deleted.
+    void expire(UInt32 id, TimePoint now) {
+        auto it = subscriptions.find(id);
+        if (it == subscriptions.end()) return;
+        const NodeId session = it->second->session;
+        notify(session, *it->second, status::BadTimeout, now);
+        deleteSubscription(id);
+        releasePublishes(session);
+    }
+
+    // Subscription `s` moves to session `to` (TransferSubscriptions).
+    void move(Subscription& s, const NodeId& to, SessionState& target, TimePoint now) {
+        const NodeId from = s.session;
+        s.session = to;
+        s.lifetimeCounter = 0;
+        target.subscriptions.push_back(s.id);
+        notify(from, s, status::GoodSubscriptionTransferred, now);
+        leave(from, s.id);
+        releasePublishes(from);
+    }
+    // sendInitialValues: the current value of every data item in Reporting mode goes out with
+    // the next message (the queued one, else the last one reported again).
+    void queueInitialValues(Subscription& s) {
+        for (auto& [_, item] : s.items) {
+            if (item->isEvent || item->mode != MonitoringMode::Reporting) continue;
+            if (item->values.empty() && item->last) {
+                DataValue v = *item->last;
+                keepTimestamps(v, item->timestamps);
+                item->values.push_back(std::move(v));
+            }
+            if (item->hasQueued()) markPending(s, item);
+        }
     }
 
     NotificationMessage buildMessage(Subscription& s, bool& more) {
@@ -709,7 +806,7 @@ struct SubscriptionEngine::Impl {
                 if (s->nextCycle < now) s->nextCycle = now + toDuration(s->publishingInterval);
                 if (!cycle(*s, now)) expired.push_back(id);
             }
-            for (UInt32 id : expired) deleteSubscription(id);
+            for (UInt32 id : expired) expire(id, now);
             // Publish requests past their timeout hint.
             for (auto& [_, st] : sessions)
                 std::erase_if(st.publishes, [&](PendingPublish& p) {
@@ -1107,13 +1204,7 @@ void SubscriptionEngine::deleteSubscriptions(const NodeId& session,
         m.deleteSubscription(id);
         resp.results.push_back(status::Good);
     }
-    // Publish requests of a session without subscriptions would wait forever.
-    auto st = m.sessions.find(session);
-    if (st != m.sessions.end() && st->second.subscriptions.empty()) {
-        for (auto& p : st->second.publishes)
-            p.conn->sendServiceFault(p.requestId, p.requestHandle, status::BadNoSubscription);
-        st->second.publishes.clear();
-    }
+    m.releasePublishes(session);
 }
 
 void SubscriptionEngine::setPublishingMode(const NodeId& session,
@@ -1182,6 +1273,16 @@ void SubscriptionEngine::publish(const NodeId& session, const Connection& conn, 
             p.ackResults.push_back(status::Good);
         }
     }
+    for (UInt32 id : st.subscriptions)
+        if (auto it = m.subscriptions.find(id); it != m.subscriptions.end())
+            it->second->lifetimeCounter = 0;
+    // A subscription that left the session (transferred, expired) says so first.
+    if (!st.notices.empty()) {
+        StatusNotice n = st.notices.front();
+        st.notices.pop_front();
+        m.sendNotice(p, n);
+        return;
+    }
     if (st.subscriptions.empty()) {
         conn->sendServiceFault(requestId, p.requestHandle, status::BadNoSubscription);
         return;
@@ -1193,9 +1294,6 @@ void SubscriptionEngine::publish(const NodeId& session, const Connection& conn, 
         st.publishes.pop_front();
     }
     st.publishes.push_back(std::move(p));
-    for (UInt32 id : st.subscriptions)
-        if (auto it = m.subscriptions.find(id); it != m.subscriptions.end())
-            it->second->lifetimeCounter = 0;
     m.serveLate(session, now);
 }
 
@@ -1439,15 +1537,62 @@ void SubscriptionEngine::setTriggering(const NodeId& session, const SetTriggerin
     }
 }
 
-void SubscriptionEngine::removeSession(const NodeId& session) {
+void SubscriptionEngine::transferSubscriptions(const NodeId& session,
+                                               const TransferSubscriptionsRequest& req,
+                                               TransferSubscriptionsResponse& resp) {
+    Impl& m = *impl_;
+    std::lock_guard lock(m.mutex);
+    auto now = Clock::now();
+    SessionState& target = m.sessions[session];
+    for (UInt32 id : req.subscriptionIds) {
+        TransferResult r;
+        auto it = m.subscriptions.find(id);
+        if (it == m.subscriptions.end()) {
+            r.statusCode = status::BadSubscriptionIdInvalid;
+            resp.results.push_back(std::move(r));
+            continue;
+        }
+        Subscription& s = *it->second;
+        if (s.session != session) {
+            auto from = m.sessions.find(s.session);
+            if (from == m.sessions.end() || !sameUser(from->second.user, target.user))
+                r.statusCode = status::BadUserAccessDenied;
+            else if (target.subscriptions.size() >= m.limits.maxSubscriptionsPerSession)
+                r.statusCode = status::BadTooManySubscriptions;
+            else
+                m.move(s, session, target, now);
+        }
+        if (r.statusCode.isGood()) {
+            if (req.sendInitialValues) m.queueInitialValues(s);
+            for (const auto& msg : s.retransmission)
+                r.availableSequenceNumbers.push_back(msg.sequenceNumber);
+        }
+        resp.results.push_back(std::move(r));
+    }
+    m.wake.notify_one();
+}
+
+void SubscriptionEngine::setSessionUser(const NodeId& session, const SessionIdentity& user) {
+    std::lock_guard lock(impl_->mutex);
+    impl_->sessions[session].user = user;
+}
+
+void SubscriptionEngine::removeSession(const NodeId& session, bool deleteSubscriptions) {
     Impl& m = *impl_;
     std::lock_guard lock(m.mutex);
     auto st = m.sessions.find(session);
     if (st == m.sessions.end()) return;
-    for (UInt32 id : std::vector<UInt32>(st->second.subscriptions)) m.deleteSubscription(id);
     for (auto& p : st->second.publishes)
         p.conn->sendServiceFault(p.requestId, p.requestHandle, status::BadSessionClosed);
-    m.sessions.erase(session);
+    st->second.publishes.clear();
+    st->second.notices.clear();
+    if (deleteSubscriptions)
+        for (UInt32 id : std::vector<UInt32>(st->second.subscriptions)) m.deleteSubscription(id);
+    // Kept subscriptions go on counting their lifetime (no Publish requests can come).
+    if (st->second.subscriptions.empty())
+        m.sessions.erase(st);
+    else
+        st->second.closed = true;
 }
 
 // ---- events -----------------------------------------------------------------------------------
