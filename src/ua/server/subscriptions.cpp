@@ -363,6 +363,7 @@ struct SubscriptionEngine::Impl {
     std::unordered_map<NodeId, std::vector<MonitoredItem*>> eventWatchers;  // by notifier
     std::atomic<std::size_t> watchedValues{0};
     std::size_t itemCount = 0;
+    std::size_t keptSubscriptions = 0;  // of closed sessions
     std::uint64_t messagesSent = 0;
     std::uint64_t samples = 0;
 
@@ -461,7 +462,7 @@ struct SubscriptionEngine::Impl {
     void leave(const NodeId& session, UInt32 id) {
         auto st = sessions.find(session);
         if (st == sessions.end()) return;
-        std::erase(st->second.subscriptions, id);
+        if (std::erase(st->second.subscriptions, id) != 0 && st->second.closed) --keptSubscriptions;
         if (st->second.closed && st->second.subscriptions.empty()) sessions.erase(st);
     }
     // Publish requests of a session without subscriptions would wait forever.
@@ -1586,13 +1587,21 @@ void SubscriptionEngine::removeSession(const NodeId& session, bool deleteSubscri
         p.conn->sendServiceFault(p.requestId, p.requestHandle, status::BadSessionClosed);
     st->second.publishes.clear();
     st->second.notices.clear();
-    if (deleteSubscriptions)
-        for (UInt32 id : std::vector<UInt32>(st->second.subscriptions)) m.deleteSubscription(id);
     // Kept subscriptions go on counting their lifetime (no Publish requests can come).
-    if (st->second.subscriptions.empty())
+    auto& subs = st->second.subscriptions;
+    const std::size_t keep =
+        deleteSubscriptions
+            ? 0
+            : std::min(subs.size(), m.limits.maxKeptSubscriptions -
+                                        std::min<std::size_t>(m.keptSubscriptions,
+                                                              m.limits.maxKeptSubscriptions));
+    while (subs.size() > keep) m.deleteSubscription(subs.back());
+    if (subs.empty()) {
         m.sessions.erase(st);
-    else
-        st->second.closed = true;
+        return;
+    }
+    st->second.closed = true;
+    m.keptSubscriptions += subs.size();
 }
 
 // ---- events -----------------------------------------------------------------------------------

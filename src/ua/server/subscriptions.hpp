@@ -40,6 +40,9 @@ struct SubscriptionLimits {
     UInt32 maxMonitoredItemsPerSubscription = 100000;
     UInt32 maxMonitoredItemsPerCall = 10000;  // Create/Modify/Delete/SetMonitoringMode
     UInt32 maxPublishRequestsPerSession = 20;
+    // Kept after their session ended (CloseSession without deleteSubscriptions, session
+    // timeout), waiting for TransferSubscriptions; beyond this they are deleted at once.
+    UInt32 maxKeptSubscriptions = 1000;
     UInt32 maxRetransmissionQueue = 32;         // kept NotificationMessages per subscription
     UInt32 maxNotificationsPerPublish = 10000;  // server cap (0 from the client: this)
     UInt32 maxQueueSize = 1000;                 // per monitored item

@@ -886,3 +886,26 @@ TEST(Subscriptions, TooManyAcknowledgementsAreRefused) {
     EXPECT_EQ(errorOf([&] { f.publish(acks); }), StatusCode(status::BadTooManyOperations));
     EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 1u);
 }
+
+TEST(Subscriptions, KeptSubscriptionsAreBounded) {
+    auto cfg = testConfig();
+    cfg.subscriptionLimits.maxKeptSubscriptions = 1;
+    server::Server server(cfg);
+    server.start();
+    CreateSubscriptionRequest cs;
+    cs.requestedPublishingInterval = 1000;
+    cs.requestedMaxKeepAliveCount = 100;
+    CloseSessionRequest close;
+    close.deleteSubscriptions = false;
+    Client a, b;
+    a.connect(url(server));
+    b.connect(url(server));
+    a.request(cs);
+    a.request(cs);
+    b.request(cs);
+    EXPECT_EQ(server.subscriptions().statistics().subscriptions, 3u);
+    a.request(close);
+    EXPECT_EQ(server.subscriptions().statistics().subscriptions, 2u);  // one of a's is kept
+    b.request(close);
+    EXPECT_EQ(server.subscriptions().statistics().subscriptions, 1u);  // no room for b's
+}
