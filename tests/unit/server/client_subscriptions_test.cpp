@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "support/loopback_server.hpp"
 #include "support/tcp_relay.hpp"
 #include "ua/client/client.hpp"
 #include "ua/client/subscription.hpp"
@@ -19,6 +20,7 @@
 
 using namespace pnp::ua;
 using namespace std::chrono_literals;
+using pnp::testing::loopbackConfig;
 
 namespace {
 
@@ -51,14 +53,6 @@ class Inbox {
 
 // A server with an Int32 variable ns=1;s=Value; the client connects through a relay whose
 // connections can be cut.
-server::ServerConfig loopbackConfig() {
-    server::ServerConfig c;
-    c.host = "127.0.0.1";
-    c.publicHost = "127.0.0.1";
-    c.port = 0;
-    return c;
-}
-
 struct Fixture {
     server::Server server;
     std::unique_ptr<pnp::testing::TcpRelay> relay;
@@ -75,7 +69,7 @@ struct Fixture {
                                           QualifiedName{1, "Value"}, a);
         server.start();
         relay = std::make_unique<pnp::testing::TcpRelay>(server.port());
-        c.connect("opc.tcp://127.0.0.1:" + std::to_string(relay->port()));
+        c.connect(pnp::testing::url(relay->port()));
         c.startBackgroundThread();
     }
 };

@@ -11,6 +11,7 @@
 #include <string>
 #include <thread>
 
+#include "support/loopback_server.hpp"
 #include "ua/client/client.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/extension_object.hpp"
@@ -20,31 +21,17 @@
 using namespace pnp::ua;
 using namespace std::chrono_literals;
 using client::Client;
+using pnp::testing::errorOf;
+using pnp::testing::url;
 
 namespace {
 
 server::ServerConfig testConfig() {
-    server::ServerConfig c;
-    c.host = "127.0.0.1";
-    c.publicHost = "127.0.0.1";
-    c.port = 0;
+    server::ServerConfig c = pnp::testing::loopbackConfig();
     c.subscriptionLimits.maxSubscriptionsPerSession = 3;
     c.subscriptionLimits.maxMonitoredItemsPerCall = 100;
     c.subscriptionLimits.maxRetransmissionQueue = 4;
     return c;
-}
-
-std::string url(const server::Server& s) {
-    return "opc.tcp://127.0.0.1:" + std::to_string(s.port());
-}
-
-StatusCode errorOf(const std::function<void()>& f) {
-    try {
-        f();
-    } catch (const client::Error& e) {
-        return e.status();
-    }
-    return status::Good;
 }
 
 // A server with a few variables in ns=1.
