@@ -395,6 +395,46 @@ struct SubscriptionEngine::Impl {
         return s;
     }
 
+    // A subscription of a session with the engine's lock held; empty (lock released, the
+    // service failed with Bad_SubscriptionIdInvalid) when the session has no such one.
+    class Locked {
+      public:
+        Locked(std::unique_lock<std::mutex> lock, Subscription* s)
+            : lock_(std::move(lock)), s_(s) {}
+        explicit operator bool() const { return s_ != nullptr; }
+        Subscription* get() const { return s_; }
+        Subscription* operator->() const { return s_; }
+        Subscription& operator*() const { return *s_; }
+
+      private:
+        std::unique_lock<std::mutex> lock_;
+        Subscription* s_;
+    };
+    Locked lockSubscription(const NodeId& session, UInt32 id, ResponseHeader& header) {
+        std::unique_lock lock(mutex);
+        Subscription* s = find(session, id, header);
+        if (s == nullptr) lock.unlock();
+        return {std::move(lock), s};
+    }
+    // For services on a list of subscriptions (the lock held): fn(subscription) for each of
+    // `ids` that is one of the session's, Bad_SubscriptionIdInvalid for the others.
+    template <class F>
+    std::vector<StatusCode> eachSubscription(const NodeId& session, const std::vector<UInt32>& ids,
+                                             F fn) {
+        std::vector<StatusCode> results;
+        results.reserve(ids.size());
+        for (UInt32 id : ids) {
+            Subscription* s = find(session, id);
+            if (s == nullptr) {
+                results.push_back(status::BadSubscriptionIdInvalid);
+                continue;
+            }
+            fn(*s);
+            results.push_back(status::Good);
+        }
+        return results;
+    }
+
     // ---- items ----------------------------------------------------------------------------------
     void addToGroup(const ItemPtr& item, double interval) {
         auto [it, added] = groups.try_emplace(interval);
@@ -1175,9 +1215,8 @@ void SubscriptionEngine::modifySubscription(const NodeId& session,
                                             const ModifySubscriptionRequest& req,
                                             ModifySubscriptionResponse& resp) {
     Impl& m = *impl_;
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     s->publishingInterval = m.revisePublishingInterval(req.requestedPublishingInterval);
     m.reviseCounts(*s, req.requestedLifetimeCount, req.requestedMaxKeepAliveCount);
     s->maxNotificationsPerPublish =
@@ -1197,14 +1236,8 @@ void SubscriptionEngine::deleteSubscriptions(const NodeId& session,
                                              DeleteSubscriptionsResponse& resp) {
     Impl& m = *impl_;
     std::lock_guard lock(m.mutex);
-    for (UInt32 id : req.subscriptionIds) {
-        if (m.find(session, id) == nullptr) {
-            resp.results.push_back(status::BadSubscriptionIdInvalid);
-            continue;
-        }
-        m.deleteSubscription(id);
-        resp.results.push_back(status::Good);
-    }
+    resp.results = m.eachSubscription(session, req.subscriptionIds,
+                                      [&](Subscription& s) { m.deleteSubscription(s.id); });
     m.releasePublishes(session);
 }
 
@@ -1213,23 +1246,16 @@ void SubscriptionEngine::setPublishingMode(const NodeId& session,
                                            SetPublishingModeResponse& resp) {
     Impl& m = *impl_;
     std::lock_guard lock(m.mutex);
-    for (UInt32 id : req.subscriptionIds) {
-        Subscription* s = m.find(session, id);
-        if (s == nullptr) {
-            resp.results.push_back(status::BadSubscriptionIdInvalid);
-            continue;
-        }
-        s->publishingEnabled = req.publishingEnabled;
-        resp.results.push_back(status::Good);
-    }
+    resp.results = m.eachSubscription(session, req.subscriptionIds, [&](Subscription& s) {
+        s.publishingEnabled = req.publishingEnabled;
+    });
 }
 
 void SubscriptionEngine::republish(const NodeId& session, const RepublishRequest& req,
                                    RepublishResponse& resp) {
     Impl& m = *impl_;
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     for (const auto& msg : s->retransmission) {
         if (msg.sequenceNumber == req.retransmitSequenceNumber) {
             resp.notificationMessage = msg;
@@ -1310,9 +1336,8 @@ void SubscriptionEngine::createMonitoredItems(const NodeId& session,
     }
     double publishingInterval = 0;
     {
-        std::lock_guard lock(m.mutex);
-        Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-        if (s == nullptr) return;
+        auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+        if (!s) return;
         publishingInterval = s->publishingInterval;
     }
     // Node and filter checks read the address space: without the engine's lock.
@@ -1330,9 +1355,8 @@ void SubscriptionEngine::createMonitoredItems(const NodeId& session,
     }
     std::vector<ItemPtr> created;
     {
-        std::lock_guard lock(m.mutex);
-        Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-        if (s == nullptr) return;
+        auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+        if (!s) return;
         for (std::size_t i = 0; i < req.itemsToCreate.size(); ++i) {
             const auto& c = req.itemsToCreate[i];
             auto& setup = setups[i];
@@ -1349,7 +1373,7 @@ void SubscriptionEngine::createMonitoredItems(const NodeId& session,
             auto item = std::make_shared<MonitoredItem>();
             item->id = s->nextItemId++;
             item->clientHandle = c.requestedParameters.clientHandle;
-            item->subscription = s;
+            item->subscription = s.get();
             item->itemToMonitor = c.itemToMonitor;
             item->mode = c.monitoringMode;
             item->timestamps = req.timestampsToReturn;
@@ -1399,9 +1423,8 @@ void SubscriptionEngine::modifyMonitoredItems(const NodeId& session,
     };
     std::vector<Target> targets(req.itemsToModify.size());
     {
-        std::lock_guard lock(m.mutex);
-        Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-        if (s == nullptr) return;
+        auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+        if (!s) return;
         for (std::size_t i = 0; i < req.itemsToModify.size(); ++i) {
             auto it = s->items.find(req.itemsToModify[i].monitoredItemId);
             if (it == s->items.end()) continue;
@@ -1413,9 +1436,8 @@ void SubscriptionEngine::modifyMonitoredItems(const NodeId& session,
         if (targets[i].found)
             setups[i] = m.setUp(targets[i].what, req.itemsToModify[i].requestedParameters,
                                 targets[i].publishingInterval);
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     for (std::size_t i = 0; i < req.itemsToModify.size(); ++i) {
         MonitoredItemModifyResult r;
         auto it = s->items.find(req.itemsToModify[i].monitoredItemId);
@@ -1457,9 +1479,8 @@ void SubscriptionEngine::deleteMonitoredItems(const NodeId& session,
                                               const DeleteMonitoredItemsRequest& req,
                                               DeleteMonitoredItemsResponse& resp) {
     Impl& m = *impl_;
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     for (UInt32 id : req.monitoredItemIds) {
         auto it = s->items.find(id);
         if (it == s->items.end()) {
@@ -1483,9 +1504,8 @@ void SubscriptionEngine::setMonitoringMode(const NodeId& session,
         resp.responseHeader.serviceResult = status::BadMonitoringModeInvalid;
         return;
     }
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     for (UInt32 id : req.monitoredItemIds) {
         auto it = s->items.find(id);
         if (it == s->items.end()) {
@@ -1510,9 +1530,8 @@ void SubscriptionEngine::setMonitoringMode(const NodeId& session,
 void SubscriptionEngine::setTriggering(const NodeId& session, const SetTriggeringRequest& req,
                                        SetTriggeringResponse& resp) {
     Impl& m = *impl_;
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     auto trig = s->items.find(req.triggeringItemId);
     if (trig == s->items.end()) {
         resp.responseHeader.serviceResult = status::BadMonitoredItemIdInvalid;
