@@ -2,9 +2,10 @@
 "use strict";
 // node-opcua subscriber: subscribes on a server that exposes the pnp demo namespace with
 // its live parts (Demo.Counter, Demo.FireEvent, DemoEventType with the custom field
-// Sequence; see src/ua/demo/demo.hpp) to data changes and to events, and prints one
+// Sequence; see src/ua/demo/demo.hpp) to data changes and to events, transfers the
+// subscription to a second session and back (TransferSubscriptions), and prints one
 // TAP-like line per check (the format of node_client.js, so scripts/test.sh counts them):
-//   ok - <name> | not ok - <name>: <reason>
+//   ok - <name> | not ok - <name>: <reason> | skip - <name>: <reason>
 // then "node_client: N passed, N failed, N skipped" (the summary scripts/test.sh reads).
 // Exit 0 only if every check passed. Bounded by PNP_CLIENT_DEADLINE_MS (default 45 s).
 //
@@ -28,6 +29,7 @@ const {
     FilterOperator,
     LiteralOperand,
     Variant,
+    StatusCodes,
     coerceNodeId,
 } = require("node-opcua");
 
@@ -189,6 +191,25 @@ async function main() {
         const [fields] = await collect(item, 1, (f) => f[0].value && f[0].value.text === "tick");
         expect(fields[1].value > 0, `Sequence ${fields[1].toString()}`);
         await item.terminate();
+    });
+
+    await check("TransferSubscriptions to a second session; the first hears Good_SubscriptionTransferred", async () => {
+        const heard = new Promise((resolve) => subscription.once("status_changed", resolve));
+        const other = await client.createSession();
+        try {
+            const id = subscription.subscriptionId;
+            const r = await other.transferSubscriptions({ subscriptionIds: [id, 0x7ffffff0], sendInitialValues: true });
+            const codes = r.results.map((x) => x.statusCode.toString()).join(", ");
+            expect(r.results.length === 2 && r.results[0].statusCode.isGood(), `results: ${codes}`);
+            expect(r.results[1].statusCode === StatusCodes.BadSubscriptionIdInvalid, `results: ${codes}`);
+            const status = await heard;
+            expect(status === StatusCodes.GoodSubscriptionTransferred, `status change: ${status.toString()}`);
+            // Back to the first session, which deletes it below.
+            const back = await session.transferSubscriptions({ subscriptionIds: [id], sendInitialValues: false });
+            expect(back.results[0].statusCode.isGood(), `back: ${back.results[0].statusCode.toString()}`);
+        } finally {
+            await other.close(true);
+        }
     });
 
     await check("DeleteSubscriptions and close the session", async () => {
