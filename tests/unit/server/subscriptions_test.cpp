@@ -131,6 +131,15 @@ double doubleOf(const MonitoredItemNotification& n) {
     return d ? *d : -1;
 }
 
+// A subscription with nothing to send for a long time (1 s, first keep-alive after 1 s).
+CreateSubscriptionRequest quietSubscription() {
+    CreateSubscriptionRequest cs;
+    cs.requestedPublishingInterval = 1000;
+    cs.requestedMaxKeepAliveCount = 100;
+    cs.publishingEnabled = true;
+    return cs;
+}
+
 std::vector<StatusCode> statusChangesOf(const PublishResponse& r) {
     std::vector<StatusCode> out;
     for (const auto& x : r.notificationMessage.notificationData)
@@ -456,10 +465,7 @@ TEST(Subscriptions, TooManyPublishRequestsAnswersTheOldest) {
     server.start();
     Client c;
     c.connect(url(server));
-    CreateSubscriptionRequest cs;
-    cs.requestedPublishingInterval = 1000;
-    cs.requestedMaxKeepAliveCount = 100;
-    cs.publishingEnabled = true;
+    const CreateSubscriptionRequest cs = quietSubscription();
     c.request(cs);
     std::vector<std::future<PublishResponse>> f;
     for (int i = 0; i < 4; ++i) f.push_back(c.requestAsync(PublishRequest{}, 10s));
@@ -734,10 +740,7 @@ TEST(Subscriptions, TransferNeedsTheSameUser) {
     alice.connect(url(server), client::UserName{"alice", "a"});
     alice2.connect(url(server), client::UserName{"alice", "a"});
     bob.connect(url(server), client::UserName{"bob", "b"});
-    CreateSubscriptionRequest cs;
-    cs.requestedPublishingInterval = 1000;
-    cs.requestedMaxKeepAliveCount = 100;
-    cs.publishingEnabled = true;
+    const CreateSubscriptionRequest cs = quietSubscription();
     const UInt32 anonSub = anon.request(cs).subscriptionId;
     const UInt32 aliceSub = alice.request(cs).subscriptionId;
     TransferSubscriptionsRequest t;
@@ -879,9 +882,7 @@ TEST(Subscriptions, KeptSubscriptionsAreBounded) {
     cfg.subscriptionLimits.maxKeptSubscriptions = 1;
     server::Server server(cfg);
     server.start();
-    CreateSubscriptionRequest cs;
-    cs.requestedPublishingInterval = 1000;
-    cs.requestedMaxKeepAliveCount = 100;
+    const CreateSubscriptionRequest cs = quietSubscription();
     CloseSessionRequest close;
     close.deleteSubscriptions = false;
     Client a, b;
