@@ -10,17 +10,9 @@
 //
 // usage: node tests/interop/node_client.js opc.tcp://127.0.0.1:4840
 
-// node-opcua logs warnings with console.log: send all library output to stderr
-// and keep stdout for this script's own lines.
-const stdoutWrite = process.stdout.write.bind(process.stdout);
-const out = (line) => stdoutWrite(line + "\n");
-process.stdout.write = process.stderr.write.bind(process.stderr);
-
-const path = require("path");
-const os = require("os");
+const { urlArg, certificateManager, oneLine, expect, Skip, checks } = require("./common");
 const {
     OPCUAClient,
-    OPCUACertificateManager,
     MessageSecurityMode,
     SecurityPolicy,
     UserTokenType,
@@ -38,73 +30,14 @@ const {
 } = require("node-opcua");
 const demo = require("./demo_types");
 
-const url = process.argv[2];
-if (!url || !url.startsWith("opc.tcp://")) {
-    console.error("usage: node_client.js opc.tcp://HOST:PORT");
-    process.exit(2);
-}
-
+const url = urlArg("node_client.js");
 const DEADLINE_MS = parseInt(process.env.PNP_CLIENT_DEADLINE_MS || "55000", 10);
 const STEP_TIMEOUT_MS = parseInt(process.env.PNP_CLIENT_STEP_TIMEOUT_MS || "10000", 10);
-
-let passed = 0;
-let failed = 0;
-let skipped = 0;
-
-function summaryAndExit(code) {
-    out(`node_client: ${passed} passed, ${failed} failed, ${skipped} skipped`);
-    process.exit(code);
-}
-
-// A late failure of an operation that already timed out must not crash the run.
-process.on("unhandledRejection", (err) => {
-    console.error("[node_client] unhandled rejection:", err && err.message ? err.message : err);
+const { check, finish, unexpected, abort } = checks({
+    tag: "node_client",
+    deadlineMs: DEADLINE_MS,
+    stepTimeoutMs: STEP_TIMEOUT_MS,
 });
-
-const deadline = setTimeout(() => {
-    failed++;
-    out(`not ok - overall deadline: run exceeded ${DEADLINE_MS} ms`);
-    summaryAndExit(1);
-}, DEADLINE_MS);
-deadline.unref();
-
-function oneLine(s) {
-    s = String(s).replace(/\s+/g, " ").trim();
-    return s.length > 300 ? s.slice(0, 297) + "..." : s;
-}
-
-class Skip extends Error {}
-
-function withTimeout(promise, ms, what) {
-    let timer;
-    const t = new Promise((_, reject) => {
-        timer = setTimeout(() => reject(new Error(`timeout after ${ms} ms (${what})`)), ms);
-    });
-    return Promise.race([promise, t]).finally(() => clearTimeout(timer));
-}
-
-// Runs one check. fn returns/throws; throw Skip to report a skip. Returns true on pass.
-async function check(name, fn, timeoutMs = STEP_TIMEOUT_MS) {
-    try {
-        await withTimeout(Promise.resolve().then(fn), timeoutMs, name);
-        passed++;
-        out(`ok - ${name}`);
-        return true;
-    } catch (err) {
-        if (err instanceof Skip) {
-            skipped++;
-            out(`skip - ${name}: ${oneLine(err.message)}`);
-            return true;
-        }
-        failed++;
-        out(`not ok - ${name}: ${oneLine(err && err.message ? err.message : err)}`);
-        return false;
-    }
-}
-
-function expect(cond, msg) {
-    if (!cond) throw new Error(msg);
-}
 
 function sc(statusCode) {
     return statusCode ? statusCode.toString() : String(statusCode);
@@ -135,12 +68,7 @@ function sameVariant(a, b) {
 }
 
 async function main() {
-    // Keep the client's PKI (created even for SecurityPolicy None) out of $HOME.
-    const pkiRoot = process.env.PNP_NODE_PKI_DIR || path.join(os.tmpdir(), "pnp-node-opcua-pki");
-    const clientCertificateManager = new OPCUACertificateManager({
-        automaticallyAcceptUnknownCertificate: true,
-        rootFolder: path.join(pkiRoot, "client"),
-    });
+    const clientCertificateManager = certificateManager("client");
     const client = OPCUAClient.create({
         applicationName: "pnp-interop-node-client",
         clientCertificateManager,
@@ -159,7 +87,7 @@ async function main() {
         await client.connect(url);
     });
     if (!connected) {
-        summaryAndExit(1);
+        abort();
     }
 
     await check("GetEndpoints returns >=1 endpoint with SecurityPolicy None", async () => {
@@ -189,7 +117,7 @@ async function main() {
     });
     if (!haveSession) {
         await client.disconnect().catch(() => {});
-        summaryAndExit(1);
+        abort();
     }
 
     let demoNs = -1;
@@ -205,7 +133,7 @@ async function main() {
     if (demoNs <= 0) {
         await session.close().catch(() => {});
         await client.disconnect().catch(() => {});
-        summaryAndExit(1);
+        abort();
     }
     const demoId = (s) => coerceNodeId(`ns=${demoNs};s=${s}`);
     const DEMO = demoId("Demo");
@@ -489,11 +417,7 @@ async function main() {
         await client.disconnect();
     });
 
-    summaryAndExit(failed === 0 ? 0 : 1);
+    finish();
 }
 
-main().catch((err) => {
-    failed++;
-    out(`not ok - unexpected error: ${oneLine(err && err.stack ? err.stack : err)}`);
-    summaryAndExit(1);
-});
+main().catch(unexpected);

@@ -7,17 +7,9 @@
 //   - anonymous, and username "operator" / password "secret"
 //   - prints a line "READY" on stdout once listening; exits on SIGTERM / SIGINT
 
-// node-opcua logs warnings with console.log: send all library output to stderr
-// and keep stdout for this script's own lines.
-const stdoutWrite = process.stdout.write.bind(process.stdout);
-const out = (line) => stdoutWrite(line + "\n");
-process.stdout.write = process.stderr.write.bind(process.stderr);
-
-const path = require("path");
-const os = require("os");
+const { out, portArg, certificateManager, shutDownOnSignals } = require("./common");
 const {
     OPCUAServer,
-    OPCUACertificateManager,
     SecurityPolicy,
     MessageSecurityMode,
     DataType,
@@ -31,11 +23,7 @@ const {
 } = require("node-opcua");
 const demo = require("./demo_types");
 
-const port = parseInt(process.argv[2] || "", 10);
-if (!Number.isInteger(port) || port <= 0 || port > 65535) {
-    console.error("usage: node_server.js PORT");
-    process.exit(2);
-}
+const port = portArg("node_server.js");
 
 const APP_URI = "urn:pnp:node-opcua-reference-server";
 
@@ -155,16 +143,8 @@ function buildDemoNamespace(server) {
 }
 
 async function main() {
-    // Keep the PKI out of $HOME so runs are self-contained and repeatable.
-    const pkiRoot = process.env.PNP_NODE_PKI_DIR || path.join(os.tmpdir(), "pnp-node-opcua-pki");
-    const serverCertificateManager = new OPCUACertificateManager({
-        automaticallyAcceptUnknownCertificate: true,
-        rootFolder: path.join(pkiRoot, "server"),
-    });
-    const userCertificateManager = new OPCUACertificateManager({
-        automaticallyAcceptUnknownCertificate: true,
-        rootFolder: path.join(pkiRoot, "user"),
-    });
+    const serverCertificateManager = certificateManager("server");
+    const userCertificateManager = certificateManager("user");
 
     const server = new OPCUAServer({
         port,
@@ -198,22 +178,7 @@ async function main() {
     buildDemoNamespace(server);
     await server.start();
 
-    let stopping = false;
-    const stop = async (sig) => {
-        if (stopping) return;
-        stopping = true;
-        log(`received ${sig}, shutting down`);
-        const hard = setTimeout(() => process.exit(0), 3000);
-        hard.unref();
-        try {
-            await server.shutdown(0);
-        } catch (err) {
-            log("shutdown error:", err && err.message);
-        }
-        process.exit(0);
-    };
-    process.on("SIGTERM", () => stop("SIGTERM"));
-    process.on("SIGINT", () => stop("SIGINT"));
+    shutDownOnSignals(server, log);
 
     const ep = server.endpoints[0] && server.endpoints[0].endpointDescriptions()[0];
     log("listening on", ep ? ep.endpointUrl : `opc.tcp://127.0.0.1:${port}`);

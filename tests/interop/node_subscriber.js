@@ -2,23 +2,18 @@
 "use strict";
 // node-opcua subscriber: subscribes on a server that exposes the pnp demo namespace with
 // its live parts (Demo.Counter, Demo.FireEvent, DemoEventType with the custom field
-// Sequence; see src/ua/demo/demo.hpp) to data changes and to events, and prints one
+// Sequence; see src/ua/demo/demo.hpp) to data changes and to events, transfers the
+// subscription to a second session and back (TransferSubscriptions), and prints one
 // TAP-like line per check (the format of node_client.js, so scripts/test.sh counts them):
-//   ok - <name> | not ok - <name>: <reason>
+//   ok - <name> | not ok - <name>: <reason> | skip - <name>: <reason>
 // then "node_client: N passed, N failed, N skipped" (the summary scripts/test.sh reads).
 // Exit 0 only if every check passed. Bounded by PNP_CLIENT_DEADLINE_MS (default 45 s).
 //
 // usage: node tests/interop/node_subscriber.js opc.tcp://127.0.0.1:4840
 
-const stdoutWrite = process.stdout.write.bind(process.stdout);
-const out = (line) => stdoutWrite(line + "\n");
-process.stdout.write = process.stderr.write.bind(process.stderr);  // library logs -> stderr
-
-const path = require("path");
-const os = require("os");
+const { urlArg, certificateManager, expect, checks } = require("./common");
 const {
     OPCUAClient,
-    OPCUACertificateManager,
     MessageSecurityMode,
     SecurityPolicy,
     AttributeIds,
@@ -34,54 +29,16 @@ const {
     FilterOperator,
     LiteralOperand,
     Variant,
+    StatusCodes,
     coerceNodeId,
 } = require("node-opcua");
 
-const url = process.argv[2];
-if (!url || !url.startsWith("opc.tcp://")) {
-    console.error("usage: node_subscriber.js opc.tcp://HOST:PORT");
-    process.exit(2);
-}
-const DEADLINE_MS = parseInt(process.env.PNP_CLIENT_DEADLINE_MS || "45000", 10);
-const STEP_TIMEOUT_MS = 10000;
-let passed = 0;
-let failed = 0;
-
-function finish(code) {
-    out(`node_client: ${passed} passed, ${failed} failed, 0 skipped`);
-    process.exit(code);
-}
-process.on("unhandledRejection", (err) => console.error("[node_subscriber] unhandled:", err && err.message));
-setTimeout(() => {
-    failed++;
-    out(`not ok - overall deadline: run exceeded ${DEADLINE_MS} ms`);
-    finish(1);
-}, DEADLINE_MS).unref();
-
-function withTimeout(promise, ms, what) {
-    let timer;
-    const t = new Promise((_, reject) => {
-        timer = setTimeout(() => reject(new Error(`timeout after ${ms} ms (${what})`)), ms);
-    });
-    return Promise.race([promise, t]).finally(() => clearTimeout(timer));
-}
-
-async function check(name, fn) {
-    try {
-        await withTimeout(Promise.resolve().then(fn), STEP_TIMEOUT_MS, name);
-        passed++;
-        out(`ok - ${name}`);
-        return true;
-    } catch (err) {
-        failed++;
-        out(`not ok - ${name}: ${String(err && err.message ? err.message : err).replace(/\s+/g, " ")}`);
-        return false;
-    }
-}
-
-function expect(cond, msg) {
-    if (!cond) throw new Error(msg);
-}
+const url = urlArg("node_subscriber.js");
+const { check, finish, unexpected, abort } = checks({
+    tag: "node_subscriber",
+    deadlineMs: parseInt(process.env.PNP_CLIENT_DEADLINE_MS || "45000", 10),
+    stepTimeoutMs: 10000,
+});
 
 // Resolves with the first `count` values the predicate accepts (bounded by the check's timeout).
 function collect(item, count, accept = () => true) {
@@ -104,13 +61,9 @@ async function created(item) {
 }
 
 async function main() {
-    const pkiRoot = process.env.PNP_NODE_PKI_DIR || path.join(os.tmpdir(), "pnp-node-opcua-pki");
     const client = OPCUAClient.create({
         applicationName: "pnp-interop-node-subscriber",
-        clientCertificateManager: new OPCUACertificateManager({
-            automaticallyAcceptUnknownCertificate: true,
-            rootFolder: path.join(pkiRoot, "client"),
-        }),
+        clientCertificateManager: certificateManager("client"),
         endpointMustExist: false,
         securityMode: MessageSecurityMode.None,
         securityPolicy: SecurityPolicy.None,
@@ -127,7 +80,7 @@ async function main() {
         ns = dv.value.value.indexOf("urn:pnp:demo");
         expect(ns > 0, "urn:pnp:demo not in the NamespaceArray");
     });
-    if (!up) finish(1);
+    if (!up) abort();
     const id = (s) => coerceNodeId(`ns=${ns};s=${s}`);
 
     let subscription = null;
@@ -147,7 +100,7 @@ async function main() {
         expect(subscription.subscriptionId > 0, `subscriptionId ${subscription.subscriptionId}`);
         expect(subscription.publishingInterval >= 10, `revised interval ${subscription.publishingInterval}`);
     });
-    if (!subscription) finish(1);
+    if (!subscription) abort();
 
     await check("data changes of Demo.Counter (live, sampling interval 0)", async () => {
         const item = ClientMonitoredItem.create(
@@ -240,16 +193,31 @@ async function main() {
         await item.terminate();
     });
 
+    await check("TransferSubscriptions to a second session; the first hears Good_SubscriptionTransferred", async () => {
+        const heard = new Promise((resolve) => subscription.once("status_changed", resolve));
+        const other = await client.createSession();
+        try {
+            const id = subscription.subscriptionId;
+            const r = await other.transferSubscriptions({ subscriptionIds: [id, 0x7ffffff0], sendInitialValues: true });
+            const codes = r.results.map((x) => x.statusCode.toString()).join(", ");
+            expect(r.results.length === 2 && r.results[0].statusCode.isGood(), `results: ${codes}`);
+            expect(r.results[1].statusCode === StatusCodes.BadSubscriptionIdInvalid, `results: ${codes}`);
+            const status = await heard;
+            expect(status === StatusCodes.GoodSubscriptionTransferred, `status change: ${status.toString()}`);
+            // Back to the first session, which deletes it below.
+            const back = await session.transferSubscriptions({ subscriptionIds: [id], sendInitialValues: false });
+            expect(back.results[0].statusCode.isGood(), `back: ${back.results[0].statusCode.toString()}`);
+        } finally {
+            await other.close(true);
+        }
+    });
+
     await check("DeleteSubscriptions and close the session", async () => {
         await subscription.terminate();
         await session.close();
         await client.disconnect();
     });
-    finish(failed === 0 ? 0 : 1);
+    finish();
 }
 
-main().catch((err) => {
-    failed++;
-    out(`not ok - unexpected error: ${String(err && err.stack ? err.stack : err).replace(/\s+/g, " ")}`);
-    finish(1);
-});
+main().catch(unexpected);

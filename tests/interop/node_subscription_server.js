@@ -12,15 +12,9 @@
 //     Message "pnp test event N", Severity 100 + (N % 800) and CustomField "custom-N"
 //   - prints "READY" on stdout once listening; exits on SIGTERM / SIGINT
 
-const stdoutWrite = process.stdout.write.bind(process.stdout);
-const out = (line) => stdoutWrite(line + "\n");
-process.stdout.write = process.stderr.write.bind(process.stderr);
-
-const path = require("path");
-const os = require("os");
+const { out, portArg, certificateManager, shutDownOnSignals } = require("./common");
 const {
     OPCUAServer,
-    OPCUACertificateManager,
     SecurityPolicy,
     MessageSecurityMode,
     DataType,
@@ -30,11 +24,7 @@ const {
 } = require("node-opcua");
 
 const NS_URI = "urn:pnp:subscription-test";
-const port = parseInt(process.argv[2] || "", 10);
-if (!Number.isInteger(port) || port <= 0 || port > 65535) {
-    console.error("usage: node_subscription_server.js PORT");
-    process.exit(2);
-}
+const port = portArg("node_subscription_server.js");
 
 function log(...args) {
     console.error("[node_subscription_server]", ...args);
@@ -99,11 +89,7 @@ function build(server) {
 }
 
 async function main() {
-    const pkiRoot = process.env.PNP_NODE_PKI_DIR || path.join(os.tmpdir(), "pnp-node-opcua-pki");
-    const serverCertificateManager = new OPCUACertificateManager({
-        automaticallyAcceptUnknownCertificate: true,
-        rootFolder: path.join(pkiRoot, "server"),
-    });
+    const serverCertificateManager = certificateManager("server");
     const server = new OPCUAServer({
         port,
         host: "127.0.0.1",
@@ -123,23 +109,9 @@ async function main() {
     const timers = build(server);
     await server.start();
 
-    let stopping = false;
-    const stop = async (sig) => {
-        if (stopping) return;
-        stopping = true;
-        log(`received ${sig}, shutting down`);
+    shutDownOnSignals(server, log, () => {
         for (const t of timers) clearInterval(t);
-        const hard = setTimeout(() => process.exit(0), 3000);
-        hard.unref();
-        try {
-            await server.shutdown(0);
-        } catch (err) {
-            log("shutdown error:", err && err.message);
-        }
-        process.exit(0);
-    };
-    process.on("SIGTERM", () => stop("SIGTERM"));
-    process.on("SIGINT", () => stop("SIGINT"));
+    });
     log(`listening on opc.tcp://127.0.0.1:${port}`);
     out("READY");
 }

@@ -35,6 +35,7 @@
 #include <thread>
 #include <vector>
 
+#include "support/loopback_server.hpp"
 #include "support/raw_socket.hpp"
 #include "ua/client/client.hpp"
 #include "ua/server/server.hpp"
@@ -324,10 +325,7 @@ class Bystander {
 class Robustness : public ::testing::Test {
   protected:
     static void SetUpTestSuite() {
-        server::ServerConfig cfg;
-        cfg.host = "127.0.0.1";
-        cfg.publicHost = "127.0.0.1";
-        cfg.port = 0;
+        server::ServerConfig cfg = pnp::testing::loopbackConfig();
         cfg.applicationUri = "urn:pnp:robustness";
         cfg.transport.receiveBufferSize = kReceiveBufferSize;
         cfg.transport.sendBufferSize = kReceiveBufferSize;
@@ -369,7 +367,7 @@ class Robustness : public ::testing::Test {
                          completer_->add(2ms, std::move(done), {Variant(s)});
                      });
         server_->start();
-        url_ = "opc.tcp://127.0.0.1:" + std::to_string(server_->port());
+        url_ = pnp::testing::url(*server_);
         bystander_ = new Bystander(url_, NodeId(ns_, "Constant"), NodeId(ns_, "Object"),
                                    NodeId(ns_, "SlowAdd"));
     }

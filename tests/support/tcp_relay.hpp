@@ -43,6 +43,12 @@ class TcpRelay {
     }
     std::uint16_t port() const { return port_; }
     void cut() { cut_ = true; }
+    // While blocked, connections are cut and new ones closed at once (the server looks
+    // unreachable, long enough for a session to time out).
+    void block(bool on) {
+        blocked_ = on;
+        if (on) cut_ = true;
+    }
 
   private:
     void closeAll() {
@@ -74,7 +80,8 @@ class TcpRelay {
                 for (int fd : {c, s})
                     if (fd >= 0)
                         ::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &sendTimeout, sizeof sendTimeout);
-                if (c >= 0 && ::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) {
+                if (c >= 0 && !blocked_ &&
+                    ::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) {
                     pairs_.emplace_back(c, s);
                 } else {
                     if (c >= 0) ::close(c);
@@ -108,6 +115,7 @@ class TcpRelay {
     int listen_ = -1;
     std::atomic<bool> stop_{false};
     std::atomic<bool> cut_{false};
+    std::atomic<bool> blocked_{false};
     std::vector<std::pair<int, int>> pairs_;
     std::thread thread_;
 };

@@ -359,6 +359,10 @@ void Server::onRequest(const std::shared_ptr<transport::ServerConnection>& conn,
                     // Both lists empty is nothing to do; either may be empty alone.
                     return r.linksToAdd.size() + r.linksToRemove.size();
                 });
+        case DataTypeInfo<TransferSubscriptionsRequest>::binaryEncodingId:
+            return serveSubscriptions(
+                conn, in, &SubscriptionEngine::transferSubscriptions,
+                +[](const TransferSubscriptionsRequest& r) { return r.subscriptionIds.size(); });
         case DataTypeInfo<GetEndpointsRequest>::binaryEncodingId:
             return serve(conn, in, false, &Server::getEndpoints);
         case DataTypeInfo<FindServersRequest>::binaryEncodingId:
@@ -393,7 +397,9 @@ void Server::expireSessions() {
     auto now = transport::Clock::now();
     std::erase_if(sessions_, [&](const auto& kv) {
         if (!kv.second->expired(now)) return false;
-        subscriptions_->removeSession(kv.second->sessionId);
+        // A session that timed out leaves its subscriptions to their own lifetime, so that
+        // the client can take them over from a new session (Part 4 §5.6.2).
+        subscriptions_->removeSession(kv.second->sessionId, false);
         return true;
     });
     updateSessionCount();
@@ -462,6 +468,7 @@ void Server::activateSession(Ctx& ctx, const ActivateSessionRequest& req,
         return;
     }
     s.identity = identity;
+    subscriptions_->setSessionUser(s.sessionId, identity);
     s.channelId = ctx.conn->channelId();
     s.activated = true;
     s.lastActivity = transport::Clock::now();
@@ -474,8 +481,9 @@ void Server::closeSession(Ctx& ctx, const CloseSessionRequest& req, CloseSession
         resp.responseHeader.serviceResult = status::BadSessionIdInvalid;
         return;
     }
-    // Subscriptions end with their session (TransferSubscriptions is not supported).
-    subscriptions_->removeSession(it->second->sessionId);
+    // deleteSubscriptions false: the subscriptions live on until their lifetime expires or
+    // another session of the same user transfers them (TransferSubscriptions).
+    subscriptions_->removeSession(it->second->sessionId, req.deleteSubscriptions);
     sessions_.erase(it);
     updateSessionCount();
 }

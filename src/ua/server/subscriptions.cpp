@@ -307,10 +307,37 @@ struct PendingPublish {
     TimePoint deadline = TimePoint::max();
 };
 
+// A StatusChangeNotification for a subscription that left its session (transferred or
+// expired), waiting for the session's next Publish request.
+struct StatusNotice {
+    UInt32 subscriptionId = 0;
+    UInt32 sequenceNumber = 0;
+    StatusCode status;
+};
+
 struct SessionState {
     std::deque<PendingPublish> publishes;
     std::vector<UInt32> subscriptions;
+    std::deque<StatusNotice> notices;  // at most maxSubscriptionsPerSession
+    SessionIdentity user;
+    bool closed = false;  // the session ended; its subscriptions wait for a transfer
 };
+
+bool sameUser(const SessionIdentity& a, const SessionIdentity& b) {
+    return a.anonymous == b.anonymous && (a.anonymous || a.userName == b.userName);
+}
+
+// The timestamps a monitored item returns (TimestampsToReturn).
+void keepTimestamps(DataValue& v, TimestampsToReturn ts) {
+    if (ts != TimestampsToReturn::Source && ts != TimestampsToReturn::Both) {
+        v.sourceTimestamp.reset();
+        v.sourcePicoseconds.reset();
+    }
+    if (ts != TimestampsToReturn::Server && ts != TimestampsToReturn::Both) {
+        v.serverTimestamp.reset();
+        v.serverPicoseconds.reset();
+    }
+}
 
 struct SamplingGroup {
     TimePoint next;
@@ -336,6 +363,7 @@ struct SubscriptionEngine::Impl {
     std::unordered_map<NodeId, std::vector<MonitoredItem*>> eventWatchers;  // by notifier
     std::atomic<std::size_t> watchedValues{0};
     std::size_t itemCount = 0;
+    std::size_t keptSubscriptions = 0;  // of closed sessions
     std::uint64_t messagesSent = 0;
     std::uint64_t samples = 0;
 
@@ -365,6 +393,46 @@ struct SubscriptionEngine::Impl {
         Subscription* s = find(session, id);
         if (s == nullptr) header.serviceResult = status::BadSubscriptionIdInvalid;
         return s;
+    }
+
+    // A subscription of a session with the engine's lock held; empty (lock released, the
+    // service failed with Bad_SubscriptionIdInvalid) when the session has no such one.
+    class Locked {
+      public:
+        Locked(std::unique_lock<std::mutex> lock, Subscription* s)
+            : lock_(std::move(lock)), s_(s) {}
+        explicit operator bool() const { return s_ != nullptr; }
+        Subscription* get() const { return s_; }
+        Subscription* operator->() const { return s_; }
+        Subscription& operator*() const { return *s_; }
+
+      private:
+        std::unique_lock<std::mutex> lock_;
+        Subscription* s_;
+    };
+    Locked lockSubscription(const NodeId& session, UInt32 id, ResponseHeader& header) {
+        std::unique_lock lock(mutex);
+        Subscription* s = find(session, id, header);
+        if (s == nullptr) lock.unlock();
+        return {std::move(lock), s};
+    }
+    // For services on a list of subscriptions (the lock held): fn(subscription) for each of
+    // `ids` that is one of the session's, Bad_SubscriptionIdInvalid for the others.
+    template <class F>
+    std::vector<StatusCode> eachSubscription(const NodeId& session, const std::vector<UInt32>& ids,
+                                             F fn) {
+        std::vector<StatusCode> results;
+        results.reserve(ids.size());
+        for (UInt32 id : ids) {
+            Subscription* s = find(session, id);
+            if (s == nullptr) {
+                results.push_back(status::BadSubscriptionIdInvalid);
+                continue;
+            }
+            fn(*s);
+            results.push_back(status::Good);
+        }
+        return results;
     }
 
     // ---- items ----------------------------------------------------------------------------------
@@ -426,9 +494,24 @@ struct SubscriptionEngine::Impl {
         Subscription& s = *it->second;
         for (auto& [_, item] : s.items) detach(*item);
         itemCount -= s.items.size();
-        auto st = sessions.find(s.session);
-        if (st != sessions.end()) std::erase(st->second.subscriptions, id);
+        const NodeId session = s.session;
         subscriptions.erase(it);
+        leave(session, id);
+    }
+    // Subscription `id` left `session` (deleted or transferred).
+    void leave(const NodeId& session, UInt32 id) {
+        auto st = sessions.find(session);
+        if (st == sessions.end()) return;
+        if (std::erase(st->second.subscriptions, id) != 0 && st->second.closed) --keptSubscriptions;
+        if (st->second.closed && st->second.subscriptions.empty()) sessions.erase(st);
+    }
+    // Publish requests of a session without subscriptions would wait forever.
+    void releasePublishes(const NodeId& session) {
+        auto st = sessions.find(session);
+        if (st == sessions.end() || !st->second.subscriptions.empty()) return;
+        for (auto& p : st->second.publishes)
+            p.conn->sendServiceFault(p.requestId, p.requestHandle, status::BadNoSubscription);
+        st->second.publishes.clear();
     }
 
     bool changed(const MonitoredItem& item, const DataValue& old, const DataValue& now) const {
@@ -463,15 +546,7 @@ struct SubscriptionEngine::Impl {
             if (!changed(*item, *item->last, v)) return false;
         }
         item->last = v;
-        const auto ts = item->timestamps;
-        if (ts != TimestampsToReturn::Source && ts != TimestampsToReturn::Both) {
-            v.sourceTimestamp.reset();
-            v.sourcePicoseconds.reset();
-        }
-        if (ts != TimestampsToReturn::Server && ts != TimestampsToReturn::Both) {
-            v.serverTimestamp.reset();
-            v.serverPicoseconds.reset();
-        }
+        keepTimestamps(v, item->timestamps);
         auto& q = item->values;
         if (q.size() >= item->queueSize) {
             if (item->queueSize == 1) {
@@ -528,6 +603,69 @@ struct SubscriptionEngine::Impl {
     bool publishAvailable(const NodeId& session) const {
         auto it = sessions.find(session);
         return it != sessions.end() && !it->second.publishes.empty();
+    }
+
+    // Answers `p` with a StatusChangeNotification of a subscription that left the session.
+    void sendNotice(PendingPublish& p, const StatusNotice& n) {
+        PublishResponse r;
+        r.subscriptionId = n.subscriptionId;
+        r.results = std::move(p.ackResults);
+        r.notificationMessage.sequenceNumber = n.sequenceNumber;
+        r.notificationMessage.publishTime = DateTime::now();
+        StatusChangeNotification sc;
+        sc.status = n.status;
+        r.notificationMessage.notificationData.push_back(toExtensionObject(sc));
+        ++messagesSent;
+        sendResponse(*p.conn, p.requestId, p.requestHandle, r);
+    }
+    // Tells an open session that subscription `s` left it (§7.20.4): on a queued Publish
+    // request at once, otherwise on the next one.
+    void notify(const NodeId& session, const Subscription& s, StatusCode status, TimePoint now) {
+        auto st = sessions.find(session);
+        if (st == sessions.end() || st->second.closed) return;
+        StatusNotice n{s.id, s.nextSequenceNumber, status};
+        if (auto p = takePublish(session, now)) {
+            sendNotice(*p, n);
+            return;
+        }
+        auto& q = st->second.notices;
+        if (q.size() >= limits.maxSubscriptionsPerSession) q.pop_front();
+        q.push_back(n);
+    }
+
+    // The lifetime of subscription `id` ran out (§5.13.1.2): its session, while open, gets a
+    // StatusChangeNotification Bad_Timeout, and the subscription is deleted.
+    void expire(UInt32 id, TimePoint now) {
+        auto it = subscriptions.find(id);
+        if (it == subscriptions.end()) return;
+        const NodeId session = it->second->session;
+        notify(session, *it->second, status::BadTimeout, now);
+        deleteSubscription(id);
+        releasePublishes(session);
+    }
+
+    // Subscription `s` moves to session `to` (TransferSubscriptions).
+    void move(Subscription& s, const NodeId& to, SessionState& target, TimePoint now) {
+        const NodeId from = s.session;
+        s.session = to;
+        s.lifetimeCounter = 0;
+        target.subscriptions.push_back(s.id);
+        notify(from, s, status::GoodSubscriptionTransferred, now);
+        leave(from, s.id);
+        releasePublishes(from);
+    }
+    // sendInitialValues: the current value of every data item in Reporting mode goes out with
+    // the next message (the queued one, else the last one reported again).
+    void queueInitialValues(Subscription& s) {
+        for (auto& [_, item] : s.items) {
+            if (item->isEvent || item->mode != MonitoringMode::Reporting) continue;
+            if (item->values.empty() && item->last) {
+                DataValue v = *item->last;
+                keepTimestamps(v, item->timestamps);
+                item->values.push_back(std::move(v));
+            }
+            if (item->hasQueued()) markPending(s, item);
+        }
     }
 
     NotificationMessage buildMessage(Subscription& s, bool& more) {
@@ -715,7 +853,7 @@ struct SubscriptionEngine::Impl {
                 if (s->nextCycle < now) s->nextCycle = now + toDuration(s->publishingInterval);
                 if (!cycle(*s, now)) expired.push_back(id);
             }
-            for (UInt32 id : expired) deleteSubscription(id);
+            for (UInt32 id : expired) expire(id, now);
             // Publish requests past their timeout hint.
             for (auto& [_, st] : sessions)
                 std::erase_if(st.publishes, [&](PendingPublish& p) {
@@ -1083,9 +1221,8 @@ void SubscriptionEngine::modifySubscription(const NodeId& session,
                                             const ModifySubscriptionRequest& req,
                                             ModifySubscriptionResponse& resp) {
     Impl& m = *impl_;
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     s->publishingInterval = m.revisePublishingInterval(req.requestedPublishingInterval);
     m.reviseCounts(*s, req.requestedLifetimeCount, req.requestedMaxKeepAliveCount);
     s->maxNotificationsPerPublish =
@@ -1105,21 +1242,9 @@ void SubscriptionEngine::deleteSubscriptions(const NodeId& session,
                                              DeleteSubscriptionsResponse& resp) {
     Impl& m = *impl_;
     std::lock_guard lock(m.mutex);
-    for (UInt32 id : req.subscriptionIds) {
-        if (m.find(session, id) == nullptr) {
-            resp.results.push_back(status::BadSubscriptionIdInvalid);
-            continue;
-        }
-        m.deleteSubscription(id);
-        resp.results.push_back(status::Good);
-    }
-    // Publish requests of a session without subscriptions would wait forever.
-    auto st = m.sessions.find(session);
-    if (st != m.sessions.end() && st->second.subscriptions.empty()) {
-        for (auto& p : st->second.publishes)
-            p.conn->sendServiceFault(p.requestId, p.requestHandle, status::BadNoSubscription);
-        st->second.publishes.clear();
-    }
+    resp.results = m.eachSubscription(session, req.subscriptionIds,
+                                      [&](Subscription& s) { m.deleteSubscription(s.id); });
+    m.releasePublishes(session);
 }
 
 void SubscriptionEngine::setPublishingMode(const NodeId& session,
@@ -1127,23 +1252,16 @@ void SubscriptionEngine::setPublishingMode(const NodeId& session,
                                            SetPublishingModeResponse& resp) {
     Impl& m = *impl_;
     std::lock_guard lock(m.mutex);
-    for (UInt32 id : req.subscriptionIds) {
-        Subscription* s = m.find(session, id);
-        if (s == nullptr) {
-            resp.results.push_back(status::BadSubscriptionIdInvalid);
-            continue;
-        }
-        s->publishingEnabled = req.publishingEnabled;
-        resp.results.push_back(status::Good);
-    }
+    resp.results = m.eachSubscription(session, req.subscriptionIds, [&](Subscription& s) {
+        s.publishingEnabled = req.publishingEnabled;
+    });
 }
 
 void SubscriptionEngine::republish(const NodeId& session, const RepublishRequest& req,
                                    RepublishResponse& resp) {
     Impl& m = *impl_;
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     for (const auto& msg : s->retransmission) {
         if (msg.sequenceNumber == req.retransmitSequenceNumber) {
             resp.notificationMessage = msg;
@@ -1188,6 +1306,16 @@ void SubscriptionEngine::publish(const NodeId& session, const Connection& conn, 
             p.ackResults.push_back(status::Good);
         }
     }
+    for (UInt32 id : st.subscriptions)
+        if (auto it = m.subscriptions.find(id); it != m.subscriptions.end())
+            it->second->lifetimeCounter = 0;
+    // A subscription that left the session (transferred, expired) says so first.
+    if (!st.notices.empty()) {
+        StatusNotice n = st.notices.front();
+        st.notices.pop_front();
+        m.sendNotice(p, n);
+        return;
+    }
     if (st.subscriptions.empty()) {
         conn->sendServiceFault(requestId, p.requestHandle, status::BadNoSubscription);
         return;
@@ -1199,9 +1327,6 @@ void SubscriptionEngine::publish(const NodeId& session, const Connection& conn, 
         st.publishes.pop_front();
     }
     st.publishes.push_back(std::move(p));
-    for (UInt32 id : st.subscriptions)
-        if (auto it = m.subscriptions.find(id); it != m.subscriptions.end())
-            it->second->lifetimeCounter = 0;
     m.serveLate(session, now);
 }
 
@@ -1217,9 +1342,8 @@ void SubscriptionEngine::createMonitoredItems(const NodeId& session,
     }
     double publishingInterval = 0;
     {
-        std::lock_guard lock(m.mutex);
-        Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-        if (s == nullptr) return;
+        auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+        if (!s) return;
         publishingInterval = s->publishingInterval;
     }
     // Node and filter checks read the address space: without the engine's lock.
@@ -1237,9 +1361,8 @@ void SubscriptionEngine::createMonitoredItems(const NodeId& session,
     }
     std::vector<ItemPtr> created;
     {
-        std::lock_guard lock(m.mutex);
-        Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-        if (s == nullptr) return;
+        auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+        if (!s) return;
         for (std::size_t i = 0; i < req.itemsToCreate.size(); ++i) {
             const auto& c = req.itemsToCreate[i];
             auto& setup = setups[i];
@@ -1256,7 +1379,7 @@ void SubscriptionEngine::createMonitoredItems(const NodeId& session,
             auto item = std::make_shared<MonitoredItem>();
             item->id = s->nextItemId++;
             item->clientHandle = c.requestedParameters.clientHandle;
-            item->subscription = s;
+            item->subscription = s.get();
             item->itemToMonitor = c.itemToMonitor;
             item->mode = c.monitoringMode;
             item->timestamps = req.timestampsToReturn;
@@ -1306,9 +1429,8 @@ void SubscriptionEngine::modifyMonitoredItems(const NodeId& session,
     };
     std::vector<Target> targets(req.itemsToModify.size());
     {
-        std::lock_guard lock(m.mutex);
-        Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-        if (s == nullptr) return;
+        auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+        if (!s) return;
         for (std::size_t i = 0; i < req.itemsToModify.size(); ++i) {
             auto it = s->items.find(req.itemsToModify[i].monitoredItemId);
             if (it == s->items.end()) continue;
@@ -1320,9 +1442,8 @@ void SubscriptionEngine::modifyMonitoredItems(const NodeId& session,
         if (targets[i].found)
             setups[i] = m.setUp(targets[i].what, req.itemsToModify[i].requestedParameters,
                                 targets[i].publishingInterval);
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     for (std::size_t i = 0; i < req.itemsToModify.size(); ++i) {
         MonitoredItemModifyResult r;
         auto it = s->items.find(req.itemsToModify[i].monitoredItemId);
@@ -1364,9 +1485,8 @@ void SubscriptionEngine::deleteMonitoredItems(const NodeId& session,
                                               const DeleteMonitoredItemsRequest& req,
                                               DeleteMonitoredItemsResponse& resp) {
     Impl& m = *impl_;
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     for (UInt32 id : req.monitoredItemIds) {
         auto it = s->items.find(id);
         if (it == s->items.end()) {
@@ -1390,9 +1510,8 @@ void SubscriptionEngine::setMonitoringMode(const NodeId& session,
         resp.responseHeader.serviceResult = status::BadMonitoringModeInvalid;
         return;
     }
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     for (UInt32 id : req.monitoredItemIds) {
         auto it = s->items.find(id);
         if (it == s->items.end()) {
@@ -1417,9 +1536,8 @@ void SubscriptionEngine::setMonitoringMode(const NodeId& session,
 void SubscriptionEngine::setTriggering(const NodeId& session, const SetTriggeringRequest& req,
                                        SetTriggeringResponse& resp) {
     Impl& m = *impl_;
-    std::lock_guard lock(m.mutex);
-    Subscription* s = m.find(session, req.subscriptionId, resp.responseHeader);
-    if (s == nullptr) return;
+    auto s = m.lockSubscription(session, req.subscriptionId, resp.responseHeader);
+    if (!s) return;
     auto trig = s->items.find(req.triggeringItemId);
     if (trig == s->items.end()) {
         resp.responseHeader.serviceResult = status::BadMonitoredItemIdInvalid;
@@ -1445,15 +1563,70 @@ void SubscriptionEngine::setTriggering(const NodeId& session, const SetTriggerin
     }
 }
 
-void SubscriptionEngine::removeSession(const NodeId& session) {
+void SubscriptionEngine::transferSubscriptions(const NodeId& session,
+                                               const TransferSubscriptionsRequest& req,
+                                               TransferSubscriptionsResponse& resp) {
+    Impl& m = *impl_;
+    std::lock_guard lock(m.mutex);
+    auto now = Clock::now();
+    SessionState& target = m.sessions[session];
+    for (UInt32 id : req.subscriptionIds) {
+        TransferResult r;
+        auto it = m.subscriptions.find(id);
+        if (it == m.subscriptions.end()) {
+            r.statusCode = status::BadSubscriptionIdInvalid;
+            resp.results.push_back(std::move(r));
+            continue;
+        }
+        Subscription& s = *it->second;
+        if (s.session != session) {
+            auto from = m.sessions.find(s.session);
+            if (from == m.sessions.end() || !sameUser(from->second.user, target.user))
+                r.statusCode = status::BadUserAccessDenied;
+            else if (target.subscriptions.size() >= m.limits.maxSubscriptionsPerSession)
+                r.statusCode = status::BadTooManySubscriptions;
+            else
+                m.move(s, session, target, now);
+        }
+        if (r.statusCode.isGood()) {
+            if (req.sendInitialValues) m.queueInitialValues(s);
+            for (const auto& msg : s.retransmission)
+                r.availableSequenceNumbers.push_back(msg.sequenceNumber);
+        }
+        resp.results.push_back(std::move(r));
+    }
+    m.wake.notify_one();
+}
+
+void SubscriptionEngine::setSessionUser(const NodeId& session, const SessionIdentity& user) {
+    std::lock_guard lock(impl_->mutex);
+    impl_->sessions[session].user = user;
+}
+
+void SubscriptionEngine::removeSession(const NodeId& session, bool deleteSubscriptions) {
     Impl& m = *impl_;
     std::lock_guard lock(m.mutex);
     auto st = m.sessions.find(session);
     if (st == m.sessions.end()) return;
-    for (UInt32 id : std::vector<UInt32>(st->second.subscriptions)) m.deleteSubscription(id);
     for (auto& p : st->second.publishes)
         p.conn->sendServiceFault(p.requestId, p.requestHandle, status::BadSessionClosed);
-    m.sessions.erase(session);
+    st->second.publishes.clear();
+    st->second.notices.clear();
+    // Kept subscriptions go on counting their lifetime (no Publish requests can come).
+    auto& subs = st->second.subscriptions;
+    const std::size_t keep =
+        deleteSubscriptions
+            ? 0
+            : std::min(subs.size(), m.limits.maxKeptSubscriptions -
+                                        std::min<std::size_t>(m.keptSubscriptions,
+                                                              m.limits.maxKeptSubscriptions));
+    while (subs.size() > keep) m.deleteSubscription(subs.back());
+    if (subs.empty()) {
+        m.sessions.erase(st);
+        return;
+    }
+    st->second.closed = true;
+    m.keptSubscriptions += subs.size();
 }
 
 // ---- events -----------------------------------------------------------------------------------

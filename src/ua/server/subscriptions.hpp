@@ -26,6 +26,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "ua/server/access_control.hpp"
 #include "ua/server/address_space.hpp"
 #include "ua/transport/tcp_server.hpp"
 #include "ua/types/ns0_types.hpp"
@@ -39,6 +40,9 @@ struct SubscriptionLimits {
     UInt32 maxMonitoredItemsPerSubscription = 100000;
     UInt32 maxMonitoredItemsPerCall = 10000;  // Create/Modify/Delete/SetMonitoringMode
     UInt32 maxPublishRequestsPerSession = 20;
+    // Kept after their session ended (CloseSession without deleteSubscriptions, session
+    // timeout), waiting for TransferSubscriptions; beyond this they are deleted at once.
+    UInt32 maxKeptSubscriptions = 1000;
     UInt32 maxRetransmissionQueue = 32;         // kept NotificationMessages per subscription
     UInt32 maxNotificationsPerPublish = 10000;  // server cap (0 from the client: this)
     UInt32 maxQueueSize = 1000;                 // per monitored item
@@ -107,9 +111,19 @@ class SubscriptionEngine {
                            SetMonitoringModeResponse& resp);
     void setTriggering(const NodeId& session, const SetTriggeringRequest& req,
                        SetTriggeringResponse& resp);
+    // Moves subscriptions of another session of the same user, or kept after their session
+    // ended, to `session` (§5.13.7); the old session, while it exists, is told with a
+    // StatusChangeNotification Good_SubscriptionTransferred.
+    void transferSubscriptions(const NodeId& session, const TransferSubscriptionsRequest& req,
+                               TransferSubscriptionsResponse& resp);
 
-    // The session is gone: its subscriptions are deleted, its Publish requests dropped.
-    void removeSession(const NodeId& session);
+    // Who the session acts for (from ActivateSession): subscriptions move only between
+    // sessions of the same user.
+    void setSessionUser(const NodeId& session, const SessionIdentity& user);
+    // The session is gone: its Publish requests are answered Bad_SessionClosed. Its
+    // subscriptions are deleted, or with deleteSubscriptions false kept until their lifetime
+    // expires or another session takes them over with TransferSubscriptions.
+    void removeSession(const NodeId& session, bool deleteSubscriptions = true);
 
     // Fires an event at its SourceNode: items on the source (when it is a notifier) and on
     // every notifier above it (inverse HasEventSource / HasNotifier, and always the Server

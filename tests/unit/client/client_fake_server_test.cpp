@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "fake_server.hpp"
+#include "support/loopback.hpp"
 #include "ua/client/client.hpp"
 #include "ua/types/status_codes.hpp"
 
@@ -16,17 +17,8 @@ namespace pnp::ua::client {
 namespace {
 
 using namespace std::chrono_literals;
+using pnp::testing::errorOf;
 using testing::FakeServer;
-
-template <class F>
-StatusCode statusOf(F&& f) {
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.status();
-    }
-    return StatusCode{};
-}
 
 template <class Pred>
 bool waitUntil(Pred pred, std::chrono::milliseconds timeout = 3000ms) {
@@ -113,12 +105,12 @@ TEST_F(ClientFake, UserNameIdentity) {
     EXPECT_EQ(u->password.view(), "secret");
 
     Client bad;
-    EXPECT_EQ(statusOf([&] {
+    EXPECT_EQ(errorOf([&] {
                   bad.connect(server.url(), UserName{"operator", "wrong"});
               }),
               status::BadUserAccessDenied);
     EXPECT_FALSE(bad.isConnected());
-    EXPECT_EQ(statusOf([&] { bad.readValue(kInt32); }), status::BadNotConnected);
+    EXPECT_EQ(errorOf([&] { bad.readValue(kInt32); }), status::BadNotConnected);
 }
 
 TEST_F(ClientFake, PerOperationStatusesAreReturned) {
@@ -137,7 +129,7 @@ TEST_F(ClientFake, PerOperationStatusesAreReturned) {
 
     DataValue dv = c.readAttribute(NodeId(1, "Nope"), AttributeId::Value);
     EXPECT_EQ(dv.statusOrGood(), status::BadNodeIdUnknown);
-    EXPECT_EQ(statusOf([&] { c.readValue(NodeId(1, "Nope")); }), status::BadNodeIdUnknown);
+    EXPECT_EQ(errorOf([&] { c.readValue(NodeId(1, "Nope")); }), status::BadNodeIdUnknown);
     EXPECT_EQ(c.readAttribute(kInt32, AttributeId::DisplayName).statusOrGood(),
               status::BadAttributeIdInvalid);
     EXPECT_EQ(c.writeValue(NodeId(1, "Nope"), Int32{1}), status::BadNodeIdUnknown);
@@ -161,10 +153,10 @@ TEST_F(ClientFake, ServiceFaultAndBadServiceResultThrow) {
     });
     Client c;
     c.connect(server.url());
-    EXPECT_EQ(statusOf([&] { c.readValue(NodeId(1, "Fault")); }), status::BadTooManyOperations);
-    EXPECT_EQ(statusOf([&] { c.readValue(NodeId(1, "BadResult")); }), status::BadNothingToDo);
+    EXPECT_EQ(errorOf([&] { c.readValue(NodeId(1, "Fault")); }), status::BadTooManyOperations);
+    EXPECT_EQ(errorOf([&] { c.readValue(NodeId(1, "BadResult")); }), status::BadNothingToDo);
     // A service the server does not implement.
-    EXPECT_EQ(statusOf([&] { c.request(HistoryReadRequest{}); }), status::BadServiceUnsupported);
+    EXPECT_EQ(errorOf([&] { c.request(HistoryReadRequest{}); }), status::BadServiceUnsupported);
     // Still usable.
     EXPECT_EQ(c.readValue(kInt32), Variant(Int32{7}));
     EXPECT_EQ(c.stats().reconnects, 0u);
@@ -178,7 +170,7 @@ TEST_F(ClientFake, ResponseCountMismatchIsAnError) {
     });
     Client c;
     c.connect(server.url());
-    EXPECT_EQ(statusOf([&] { c.readValue(kInt32); }), status::BadUnexpectedError);
+    EXPECT_EQ(errorOf([&] { c.readValue(kInt32); }), status::BadUnexpectedError);
 }
 
 TEST_F(ClientFake, GenericRequest) {
@@ -245,15 +237,15 @@ TEST_F(ClientFake, BrowseFollowsContinuationPoints) {
     BrowseDescription unknown = d;
     unknown.nodeId = NodeId(1, "Nope");
     EXPECT_EQ(c.browse(unknown).statusCode, status::BadNodeIdUnknown);
-    EXPECT_EQ(statusOf([&] { c.browse(NodeId(1, "Nope")); }), status::BadNodeIdUnknown);
+    EXPECT_EQ(errorOf([&] { c.browse(NodeId(1, "Nope")); }), status::BadNodeIdUnknown);
 }
 
 TEST_F(ClientFake, ResolvePath) {
     Client c;
     c.connect(server.url());
     EXPECT_EQ(c.resolve("/Objects/Server/ServerStatus"), NodeId(0, 2256));
-    EXPECT_EQ(statusOf([&] { c.resolve("/Objects/Nope"); }), status::BadNoMatch);
-    EXPECT_EQ(statusOf([&] { c.resolve("<Bad"); }), status::BadSyntaxError);
+    EXPECT_EQ(errorOf([&] { c.resolve("/Objects/Nope"); }), status::BadNoMatch);
+    EXPECT_EQ(errorOf([&] { c.resolve("<Bad"); }), status::BadSyntaxError);
     auto rs = server.received();
     auto tr = rs[2].decodeAs<TranslateBrowsePathsToNodeIdsRequest>();
     ASSERT_EQ(tr.browsePaths.size(), 1u);
@@ -273,9 +265,9 @@ TEST_F(ClientFake, NamespacesAreCached) {
     EXPECT_EQ(c.parseNodeId("i=85"), NodeId(0, 85));
     EXPECT_EQ(server.readsOf(NodeId(0, 2255)), 1u);
     // Unknown: read once more, then BadNotFound.
-    EXPECT_EQ(statusOf([&] { c.namespaceIndex("urn:nope"); }), status::BadNotFound);
+    EXPECT_EQ(errorOf([&] { c.namespaceIndex("urn:nope"); }), status::BadNotFound);
     EXPECT_EQ(server.readsOf(NodeId(0, 2255)), 2u);
-    EXPECT_EQ(statusOf([&] { c.parseNodeId("garbage"); }), status::BadNodeIdInvalid);
+    EXPECT_EQ(errorOf([&] { c.parseNodeId("garbage"); }), status::BadNodeIdInvalid);
     EXPECT_EQ(c.toNodeId(ExpandedNodeId(NodeId(0, "Int32"), "urn:fake:demo", 0)), kInt32);
     // A new server-side namespace shows up after a refresh.
     server.setValue(NodeId(0, 2255), Variant(std::vector<String>{"http://opcfoundation.org/UA/",
@@ -321,7 +313,7 @@ TEST_F(ClientFake, DestructorAndDisconnectCloseTheSession) {
     c.disconnect();
     EXPECT_EQ(server.count<CloseSessionRequest>(), 2u);
     EXPECT_FALSE(c.isConnected());
-    EXPECT_EQ(statusOf([&] { c.readValue(kInt32); }), status::BadNotConnected);
+    EXPECT_EQ(errorOf([&] { c.readValue(kInt32); }), status::BadNotConnected);
     c.disconnect();           // twice is fine
     c.connect(server.url());  // and again
     EXPECT_EQ(c.readValue(kInt32), Variant(Int32{7}));
@@ -356,7 +348,7 @@ TEST_F(ClientFake, TimeoutKeepsTheClientUsableAndDiscardsTheLateResponse) {
     Client c;
     c.connect(server.url());
     auto t0 = Clock::now();
-    EXPECT_EQ(statusOf([&] { c.readValue(NodeId(1, "Slow"), 100ms); }), status::BadTimeout);
+    EXPECT_EQ(errorOf([&] { c.readValue(NodeId(1, "Slow"), 100ms); }), status::BadTimeout);
     auto elapsed = Clock::now() - t0;
     EXPECT_GE(elapsed, 95ms);
     EXPECT_LT(elapsed, 250ms);
@@ -376,16 +368,16 @@ TEST_F(ClientFake, DefaultDeadlineIsTheConfiguredRequestTimeout) {
     Client c(cfg);
     c.connect(server.url());
     auto t0 = Clock::now();
-    EXPECT_EQ(statusOf([&] { c.writeValue(kInt32, Int32{1}); }), status::BadTimeout);
+    EXPECT_EQ(errorOf([&] { c.writeValue(kInt32, Int32{1}); }), status::BadTimeout);
     EXPECT_LT(Clock::now() - t0, 400ms);
     // Absolute deadline.
     t0 = Clock::now();
-    EXPECT_EQ(statusOf([&] { c.writeValue(kInt32, Int32{1}, Clock::now() + 50ms); }),
+    EXPECT_EQ(errorOf([&] { c.writeValue(kInt32, Int32{1}, Clock::now() + 50ms); }),
               status::BadTimeout);
     EXPECT_LT(Clock::now() - t0, 300ms);
     // A deadline already passed: not even sent.
     std::size_t reads = server.count<ReadRequest>();
-    EXPECT_EQ(statusOf([&] { c.readValue(kInt32, Clock::now() - 1s); }), status::BadTimeout);
+    EXPECT_EQ(errorOf([&] { c.readValue(kInt32, Clock::now() - 1s); }), status::BadTimeout);
     std::optional<Result<Variant>> got;
     c.readValueAsync(
         kInt32, [&](Result<Variant> r) { got = std::move(r); }, Clock::now() - 1s);
@@ -418,7 +410,7 @@ TEST_F(ClientFake, NonIdempotentCallIsNotRetried) {
     server.dropFirst<WriteRequest>();
     Client c;
     c.connect(server.url());
-    StatusCode s = statusOf([&] { c.writeValue(kInt32, Int32{5}); });
+    StatusCode s = errorOf([&] { c.writeValue(kInt32, Int32{5}); });
     EXPECT_EQ(s, status::BadConnectionClosed);
     EXPECT_EQ(server.count<WriteRequest>(), 1u);
     // The next call reconnects first.
@@ -435,7 +427,7 @@ TEST_F(ClientFake, RetryIdempotentCanBeDisabled) {
     cfg.reconnect.retryIdempotent = false;
     Client c(cfg);
     c.connect(server.url());
-    EXPECT_EQ(statusOf([&] { c.readValue(kInt32); }), status::BadConnectionClosed);
+    EXPECT_EQ(errorOf([&] { c.readValue(kInt32); }), status::BadConnectionClosed);
     EXPECT_EQ(c.readValue(kInt32), Variant(Int32{7}));
 }
 
@@ -495,9 +487,9 @@ TEST_F(ClientFake, ReconnectDisabled) {
     c.connect(server.url());
     server.dropConnections();
     std::this_thread::sleep_for(50ms);
-    StatusCode s = statusOf([&] { c.readValue(kInt32); });
+    StatusCode s = errorOf([&] { c.readValue(kInt32); });
     EXPECT_TRUE(s.isBad());
-    EXPECT_EQ(statusOf([&] { c.readValue(kInt32); }), status::BadNotConnected);
+    EXPECT_EQ(errorOf([&] { c.readValue(kInt32); }), status::BadNotConnected);
     EXPECT_TRUE(c.isConnected());  // until disconnect(): connect() again to recover
     c.connect(server.url());
     EXPECT_EQ(c.readValue(kInt32), Variant(Int32{7}));
@@ -509,10 +501,10 @@ TEST(ClientReconnect, ServerGoneFailsWithinTheDeadline) {
     c.connect(server->url());
     server.reset();
     auto t0 = Clock::now();
-    StatusCode s = statusOf([&] { c.readValue(kInt32, 1s); });
+    StatusCode s = errorOf([&] { c.readValue(kInt32, 1s); });
     EXPECT_TRUE(s.isBad());
     EXPECT_LT(Clock::now() - t0, 1500ms);
-    s = statusOf([&] { c.readValue(kInt32, 1s); });
+    s = errorOf([&] { c.readValue(kInt32, 1s); });
     EXPECT_TRUE(s.isBad());
     EXPECT_LT(Clock::now() - t0, 3s);
 }

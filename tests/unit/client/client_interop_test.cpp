@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "child_process.hpp"
+#include "support/loopback.hpp"
 #include "ua/client/browse_path.hpp"
 #include "ua/client/client.hpp"
 #include "ua/types/ns0_ids.hpp"
@@ -28,6 +29,7 @@ namespace pnp::ua::client {
 namespace {
 
 using namespace std::chrono_literals;
+using pnp::testing::errorOf;
 
 constexpr const char* kDemoUri = "urn:pnp:demo";
 
@@ -48,7 +50,7 @@ class NodeServer : public ::testing::Environment {
             return;
         }
         UInt16 port = freePort();
-        url_ = "opc.tcp://127.0.0.1:" + std::to_string(port);
+        url_ = pnp::testing::url(port);
         std::string log = ::testing::TempDir() + "pnp_client_interop_node_server_" +
                           std::to_string(::getpid()) + ".log";
         if (!process_.start({node, script, std::to_string(port)}, log, error_) ||
@@ -78,16 +80,6 @@ class NodeServer : public ::testing::Environment {
 };
 
 NodeServer* g_server = nullptr;
-
-template <class F>
-StatusCode statusOf(F&& f) {
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.status();
-    }
-    return StatusCode{};
-}
 
 class Interop : public ::testing::Test {
   protected:
@@ -251,7 +243,7 @@ TEST_F(Interop, UserNameSession) {
     EXPECT_EQ(c.readValue(NodeId(demo, "Scalar.Int32")), Variant(Int32{4711}));
 
     Client bad;
-    StatusCode s = statusOf([&] { bad.connect(url, UserName{"operator", "wrong"}); });
+    StatusCode s = errorOf([&] { bad.connect(url, UserName{"operator", "wrong"}); });
     EXPECT_TRUE(s.isBad()) << s.toString();
     EXPECT_FALSE(bad.isConnected());
 }
@@ -322,7 +314,7 @@ TEST_F(Interop, TranslateBrowsePaths) {
     EXPECT_EQ(c.resolve(path), NodeId(demo, "Scalar.Int32"));
     EXPECT_EQ(c.resolve(NodeId(0, ns0::Server), "ServerStatus/BuildInfo"),
               NodeId(0, ns0::Server_ServerStatus_BuildInfo));
-    EXPECT_EQ(statusOf([&] { c.resolve("/Objects/NoSuchThing"); }), status::BadNoMatch);
+    EXPECT_EQ(errorOf([&] { c.resolve("/Objects/NoSuchThing"); }), status::BadNoMatch);
 
     BrowsePath bp{};
     bp.startingNode = NodeId(0, ns0::RootFolder);
@@ -378,7 +370,7 @@ TEST_F(Interop, NamespaceArray) {
     EXPECT_GE(i, 1);
     EXPECT_EQ(ns.at(i), kDemoUri);
     EXPECT_EQ(c.parseNodeId("nsu=urn:pnp:demo;s=Demo"), NodeId(i, "Demo"));
-    EXPECT_EQ(statusOf([&] { c.namespaceIndex("urn:not:there"); }), status::BadNotFound);
+    EXPECT_EQ(errorOf([&] { c.namespaceIndex("urn:not:there"); }), status::BadNotFound);
 }
 
 TEST_F(Interop, WriteAndReadBackEveryScalar) {
@@ -484,9 +476,9 @@ TEST_F(Interop, UnknownNode) {
     connect(c);
     NodeId nope(demo, "NoSuchNode");
     EXPECT_EQ(c.readAttribute(nope, AttributeId::Value).statusOrGood(), status::BadNodeIdUnknown);
-    EXPECT_EQ(statusOf([&] { c.readValue(nope); }), status::BadNodeIdUnknown);
+    EXPECT_EQ(errorOf([&] { c.readValue(nope); }), status::BadNodeIdUnknown);
     EXPECT_EQ(c.writeValue(nope, Int32{1}), status::BadNodeIdUnknown);
-    EXPECT_EQ(statusOf([&] { c.browse(nope); }), status::BadNodeIdUnknown);
+    EXPECT_EQ(errorOf([&] { c.browse(nope); }), status::BadNodeIdUnknown);
     EXPECT_TRUE(c.call(nope, NodeId(demo, "Demo.Add"), {Int32{1}, Int32{2}}).status.isBad());
     // The session is still fine.
     EXPECT_NO_THROW(c.readValue(NodeId(0, ns0::Server_ServerStatus_CurrentTime)));
@@ -542,14 +534,14 @@ TEST_F(Interop, RequestDeadlines) {
     // A deadline that passed before sending: BadTimeout at once, nothing is sent.
     auto sent = c.stats().requestsSent;
     auto t0 = Clock::now();
-    EXPECT_EQ(statusOf([&] { c.readValue(t, Clock::now() - 1s); }), status::BadTimeout);
-    EXPECT_EQ(statusOf([&] { c.readValue(t, std::chrono::nanoseconds(1)); }), status::BadTimeout);
+    EXPECT_EQ(errorOf([&] { c.readValue(t, Clock::now() - 1s); }), status::BadTimeout);
+    EXPECT_EQ(errorOf([&] { c.readValue(t, std::chrono::nanoseconds(1)); }), status::BadTimeout);
     EXPECT_LT(Clock::now() - t0, 50ms);
     EXPECT_EQ(c.stats().requestsSent, sent);
     // A deadline shorter than node-opcua's response time: sent, then BadTimeout.
     int timedOut = 0;
     for (int i = 0; i < 50 && timedOut == 0; ++i)
-        if (statusOf([&] { c.readValue(t, std::chrono::microseconds(50)); }) == status::BadTimeout)
+        if (errorOf([&] { c.readValue(t, std::chrono::microseconds(50)); }) == status::BadTimeout)
             ++timedOut;
     ASSERT_EQ(timedOut, 1);
     // Usable afterwards; the late response is discarded.

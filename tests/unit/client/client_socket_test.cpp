@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "fake_server.hpp"
+#include "support/loopback.hpp"
 #include "ua/client/client.hpp"
 #include "ua/types/status_codes.hpp"
 
@@ -20,6 +21,7 @@ namespace pnp::ua::client {
 namespace {
 
 using namespace std::chrono_literals;
+using pnp::testing::errorOf;
 
 // A listening socket on 127.0.0.1 that never accepts (the kernel completes the handshake).
 class SilentListener {
@@ -38,7 +40,7 @@ class SilentListener {
     }
     ~SilentListener() { ::close(fd_); }
     int fd() const { return fd_; }
-    std::string url() const { return "opc.tcp://127.0.0.1:" + std::to_string(port_); }
+    std::string url() const { return pnp::testing::url(port_); }
 
   private:
     int fd_ = -1;
@@ -78,23 +80,13 @@ class DroppingListener {
     std::thread thread_;
 };
 
-template <class F>
-StatusCode statusOf(F&& f) {
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.status();
-    }
-    return StatusCode{};
-}
-
 TEST(ClientSocket, CallsWithoutConnectionFailWithBadNotConnected) {
     Client c;
     EXPECT_FALSE(c.isConnected());
     EXPECT_EQ(c.nativeHandle(), -1);
-    EXPECT_EQ(statusOf([&] { c.readValue(NodeId(0, 2258)); }), status::BadNotConnected);
-    EXPECT_EQ(statusOf([&] { c.getEndpoints(); }), status::BadNotConnected);
-    EXPECT_EQ(statusOf([&] { c.writeValue(NodeId(1, 1), Int32{1}); }), status::BadNotConnected);
+    EXPECT_EQ(errorOf([&] { c.readValue(NodeId(0, 2258)); }), status::BadNotConnected);
+    EXPECT_EQ(errorOf([&] { c.getEndpoints(); }), status::BadNotConnected);
+    EXPECT_EQ(errorOf([&] { c.writeValue(NodeId(1, 1), Int32{1}); }), status::BadNotConnected);
     c.disconnect();  // harmless
 }
 
@@ -102,7 +94,7 @@ TEST(ClientSocket, ConnectToSilentListenerTimesOut) {
     SilentListener l;
     Client c;
     auto t0 = Clock::now();
-    EXPECT_EQ(statusOf([&] { c.connect(l.url(), Anonymous{}, 200ms); }), status::BadTimeout);
+    EXPECT_EQ(errorOf([&] { c.connect(l.url(), Anonymous{}, 200ms); }), status::BadTimeout);
     auto elapsed = Clock::now() - t0;
     EXPECT_GE(elapsed, 190ms);
     EXPECT_LT(elapsed, 1500ms);
@@ -113,7 +105,7 @@ TEST(ClientSocket, ConnectToSilentListenerTimesOut) {
     cfg.connectTimeout = 150ms;
     Client c2(cfg);
     t0 = Clock::now();
-    EXPECT_EQ(statusOf([&] { c2.connect(l.url()); }), status::BadTimeout);
+    EXPECT_EQ(errorOf([&] { c2.connect(l.url()); }), status::BadTimeout);
     EXPECT_LT(Clock::now() - t0, 1500ms);
 
     // Still usable afterwards.
@@ -127,7 +119,7 @@ TEST(ClientSocket, DiscoveryAgainstSilentListenerTimesOut) {
     SilentListener l;
     Client c;
     auto t0 = Clock::now();
-    EXPECT_EQ(statusOf([&] { c.getEndpoints(l.url(), 150ms); }), status::BadTimeout);
+    EXPECT_EQ(errorOf([&] { c.getEndpoints(l.url(), 150ms); }), status::BadTimeout);
     EXPECT_LT(Clock::now() - t0, 1500ms);
 }
 
@@ -135,13 +127,13 @@ TEST(ClientSocket, ListenerThatDropsTheConnection) {
     DroppingListener l;
     Client c;
     auto t0 = Clock::now();
-    StatusCode s = statusOf([&] { c.connect(l.url(), Anonymous{}, 5s); });
+    StatusCode s = errorOf([&] { c.connect(l.url(), Anonymous{}, 5s); });
     EXPECT_TRUE(s.isBad());
     EXPECT_NE(s, status::BadTimeout);
     EXPECT_LT(Clock::now() - t0, 2s);
     EXPECT_FALSE(c.isConnected());
     // Again: the client is reusable.
-    s = statusOf([&] { c.connect(l.url(), Anonymous{}, 5s); });
+    s = errorOf([&] { c.connect(l.url(), Anonymous{}, 5s); });
     EXPECT_TRUE(s.isBad());
     EXPECT_GE(l.accepted(), 1);
 }
@@ -154,15 +146,14 @@ TEST(ClientSocket, ClosedPortIsRefused) {
     }
     Client c;
     auto t0 = Clock::now();
-    StatusCode s = statusOf(
-        [&] { c.connect("opc.tcp://127.0.0.1:" + std::to_string(port), Anonymous{}, 5s); });
+    StatusCode s = errorOf([&] { c.connect(pnp::testing::url(port), Anonymous{}, 5s); });
     EXPECT_TRUE(s.isBad());
     EXPECT_LT(Clock::now() - t0, 2s);
 }
 
 TEST(ClientSocket, InvalidUrl) {
     Client c;
-    EXPECT_EQ(statusOf([&] { c.connect("http://nowhere"); }), status::BadTcpEndpointUrlInvalid);
+    EXPECT_EQ(errorOf([&] { c.connect("http://nowhere"); }), status::BadTcpEndpointUrlInvalid);
 }
 
 }  // namespace

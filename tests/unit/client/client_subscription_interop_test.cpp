@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "child_process.hpp"
+#include "support/loopback.hpp"
 #include "support/tcp_relay.hpp"
 #include "ua/client/client.hpp"
 #include "ua/client/subscription.hpp"
@@ -60,7 +61,7 @@ class NodeServer {
         return {};
     }
     void stop() { process_.stop(); }
-    std::string url() const { return "opc.tcp://127.0.0.1:" + std::to_string(port_); }
+    std::string url() const { return pnp::testing::url(port_); }
     UInt16 port() const { return port_; }
     std::string skipReason;
 
@@ -278,7 +279,7 @@ TEST_F(SubscriptionInterop, SurvivesAServerRestartByRecreating) {
 TEST_F(SubscriptionInterop, SurvivesADroppedConnectionWithTheSameSession) {
     pnp::testing::TcpRelay relay(server.port());
     Client client(fastReconnect());
-    client.connect("opc.tcp://127.0.0.1:" + std::to_string(relay.port()));
+    client.connect(pnp::testing::url(relay.port()));
     UInt16 ns = client.namespaceIndex(kNsUri);
     NodeId session = client.sessionId();
     Recorder rec;

@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "support/loopback.hpp"
 #include "ua/transport/tcp_server.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_types.hpp"
@@ -70,7 +71,7 @@ class FakeServer : public transport::ServiceHandler {
         for (auto& t : ts) t.join();
     }
 
-    std::string url() const { return "opc.tcp://127.0.0.1:" + std::to_string(server_->port()); }
+    std::string url() const { return pnp::testing::url(server_->port()); }
     UInt16 port() const { return server_->port(); }
 
     void setHook(Hook h) {

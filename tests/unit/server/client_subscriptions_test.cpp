@@ -3,6 +3,7 @@
 // custom fields, and a dropped connection that the client re-establishes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <memory>
@@ -10,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "support/loopback_server.hpp"
 #include "support/tcp_relay.hpp"
 #include "ua/client/client.hpp"
 #include "ua/client/subscription.hpp"
@@ -18,6 +20,7 @@
 
 using namespace pnp::ua;
 using namespace std::chrono_literals;
+using pnp::testing::loopbackConfig;
 
 namespace {
 
@@ -51,18 +54,13 @@ class Inbox {
 // A server with an Int32 variable ns=1;s=Value; the client connects through a relay whose
 // connections can be cut.
 struct Fixture {
-    server::Server server{[] {
-        server::ServerConfig c;
-        c.host = "127.0.0.1";
-        c.publicHost = "127.0.0.1";
-        c.port = 0;
-        return c;
-    }()};
+    server::Server server;
     std::unique_ptr<pnp::testing::TcpRelay> relay;
     client::Client c;
     NodeId value{1, "Value"};
 
-    Fixture() {
+    explicit Fixture(server::ServerConfig sc = loopbackConfig(), client::ClientConfig cc = {})
+        : server(std::move(sc)), c(std::move(cc)) {
         server::VariableAttributes a;
         a.dataType = NodeId(0, ns0::Int32);
         a.value = DataValue(Variant(Int32{0}));
@@ -71,7 +69,7 @@ struct Fixture {
                                           QualifiedName{1, "Value"}, a);
         server.start();
         relay = std::make_unique<pnp::testing::TcpRelay>(server.port());
-        c.connect("opc.tcp://127.0.0.1:" + std::to_string(relay->port()));
+        c.connect(pnp::testing::url(relay->port()));
         c.startBackgroundThread();
     }
 };
@@ -154,4 +152,45 @@ TEST(ClientSubscriptions, SurviveADroppedConnection) {
         10s));
     ASSERT_TRUE(f.server.addressSpace().setValue(f.value, DataValue(Variant(Int32{5}))).isGood());
     EXPECT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 5); }, 10s));
+}
+
+TEST(ClientSubscriptions, TransferredToANewSessionWhenTheOldOneTimedOut) {
+    auto sc = loopbackConfig();
+    sc.minSessionTimeoutMs = 200;
+    client::ClientConfig cc;
+    cc.requestedSessionTimeout = 400ms;
+    cc.reconnect.maxDelay = 200ms;
+    Fixture f(sc, cc);
+    Inbox<DataValue> got;
+    Inbox<client::SubscriptionStatus::Kind> status;
+    // A lifetime of 30 s outlives the session (0.4 s).
+    client::Subscription sub(f.c, {.publishingInterval = 10, .lifetimeCount = 3000},
+                             [&](const client::SubscriptionStatus& s) { status.put(s.kind); });
+    client::MonitoredItem item =
+        sub.monitorValue(f.value, [&](const DataValue& v) { got.put(v); }, {.samplingInterval = 0});
+    ASSERT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 0); }));
+    const UInt32 id = sub.revised().subscriptionId;
+
+    // The server is out of reach until the session has timed out; the subscription stays.
+    f.relay->block(true);
+    const auto until = std::chrono::steady_clock::now() + 10s;
+    while (f.server.sessionCount() != 0 && std::chrono::steady_clock::now() < until)
+        std::this_thread::sleep_for(20ms);
+    ASSERT_EQ(f.server.sessionCount(), 0u);
+    EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 1u);
+    ASSERT_TRUE(f.server.addressSpace().setValue(f.value, DataValue(Variant(Int32{5}))).isGood());
+
+    // The client opens a new session and takes the subscription over.
+    f.relay->block(false);
+    auto has = [](client::SubscriptionStatus::Kind want) {
+        return [want](const auto& k) { return std::find(k.begin(), k.end(), want) != k.end(); };
+    };
+    ASSERT_TRUE(status.waitFor(has(client::SubscriptionStatus::Kind::Transferred), 10s));
+    EXPECT_FALSE(has(client::SubscriptionStatus::Kind::Recreated)(status.items()));
+    EXPECT_EQ(sub.revised().subscriptionId, id);
+    EXPECT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 5); }, 10s))
+        << "the value set meanwhile";
+    ASSERT_TRUE(f.server.addressSpace().setValue(f.value, DataValue(Variant(Int32{6}))).isGood());
+    EXPECT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 6); }, 10s));
+    EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 1u);
 }

@@ -7,6 +7,7 @@
 #include <mutex>
 #include <thread>
 
+#include "support/loopback_server.hpp"
 #include "ua/client/client.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
@@ -15,29 +16,15 @@
 using namespace pnp::ua;
 using namespace std::chrono_literals;
 using client::Client;
+using pnp::testing::errorOf;
+using pnp::testing::url;
 
 namespace {
 
 server::ServerConfig testConfig() {
-    server::ServerConfig c;
-    c.host = "127.0.0.1";
-    c.publicHost = "127.0.0.1";
-    c.port = 0;
+    server::ServerConfig c = pnp::testing::loopbackConfig();
     c.applicationUri = "urn:pnp:test";
     return c;
-}
-
-std::string url(const server::Server& s) {
-    return "opc.tcp://127.0.0.1:" + std::to_string(s.port());
-}
-
-StatusCode errorOf(const std::function<void()>& f) {
-    try {
-        f();
-    } catch (const client::Error& e) {
-        return e.status();
-    }
-    return status::Good;
 }
 
 }  // namespace

@@ -4,9 +4,14 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
+#include <map>
+#include <memory>
+#include <string>
 #include <thread>
 
+#include "support/loopback_server.hpp"
 #include "ua/client/client.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/extension_object.hpp"
@@ -16,31 +21,17 @@
 using namespace pnp::ua;
 using namespace std::chrono_literals;
 using client::Client;
+using pnp::testing::errorOf;
+using pnp::testing::url;
 
 namespace {
 
 server::ServerConfig testConfig() {
-    server::ServerConfig c;
-    c.host = "127.0.0.1";
-    c.publicHost = "127.0.0.1";
-    c.port = 0;
+    server::ServerConfig c = pnp::testing::loopbackConfig();
     c.subscriptionLimits.maxSubscriptionsPerSession = 3;
     c.subscriptionLimits.maxMonitoredItemsPerCall = 100;
     c.subscriptionLimits.maxRetransmissionQueue = 4;
     return c;
-}
-
-std::string url(const server::Server& s) {
-    return "opc.tcp://127.0.0.1:" + std::to_string(s.port());
-}
-
-StatusCode errorOf(const std::function<void()>& f) {
-    try {
-        f();
-    } catch (const client::Error& e) {
-        return e.status();
-    }
-    return status::Good;
 }
 
 // A server with a few variables in ns=1.
@@ -138,6 +129,32 @@ std::vector<EventFieldList> eventsOf(const PublishResponse& r) {
 double doubleOf(const MonitoredItemNotification& n) {
     const Double* d = n.value.value ? n.value.value->scalar<Double>() : nullptr;
     return d ? *d : -1;
+}
+
+// A subscription with nothing to send for a long time (1 s, first keep-alive after 1 s).
+CreateSubscriptionRequest quietSubscription() {
+    CreateSubscriptionRequest cs;
+    cs.requestedPublishingInterval = 1000;
+    cs.requestedMaxKeepAliveCount = 100;
+    cs.publishingEnabled = true;
+    return cs;
+}
+
+std::vector<StatusCode> statusChangesOf(const PublishResponse& r) {
+    std::vector<StatusCode> out;
+    for (const auto& x : r.notificationMessage.notificationData)
+        if (auto d = fromExtensionObject<StatusChangeNotification>(x)) out.push_back(d->status);
+    return out;
+}
+
+// Publishes on `c` until a message with notifications arrives (bounded).
+PublishResponse publishData(Client& c) {
+    for (int i = 0; i < 50; ++i) {
+        auto r = c.request(PublishRequest{}, 5s);
+        if (!r.notificationMessage.notificationData.empty()) return r;
+    }
+    ADD_FAILURE() << "no data in 50 Publish responses";
+    return {};
 }
 
 ExtensionObject absoluteDeadband(Double v, DeadbandType type = DeadbandType::Absolute) {
@@ -448,10 +465,7 @@ TEST(Subscriptions, TooManyPublishRequestsAnswersTheOldest) {
     server.start();
     Client c;
     c.connect(url(server));
-    CreateSubscriptionRequest cs;
-    cs.requestedPublishingInterval = 1000;
-    cs.requestedMaxKeepAliveCount = 100;
-    cs.publishingEnabled = true;
+    const CreateSubscriptionRequest cs = quietSubscription();
     c.request(cs);
     std::vector<std::future<PublishResponse>> f;
     for (int i = 0; i < 4; ++i) f.push_back(c.requestAsync(PublishRequest{}, 10s));
@@ -635,12 +649,149 @@ TEST(Events, InvalidFiltersAreRefusedWithResults) {
 
 TEST(Subscriptions, LifetimeExpiresWithoutPublishRequests) {
     Fixture f;
-    f.subscribe(10, 1);  // keep-alive 1, lifetime revised to >= 3 intervals
+    const UInt32 sub = f.subscribe(10, 1);  // keep-alive 1, lifetime revised to >= 3 intervals
     EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 1u);
     for (int i = 0; i < 200 && f.server.subscriptions().statistics().subscriptions != 0; ++i)
         std::this_thread::sleep_for(5ms);
     EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 0u);
+    // The session, still open, hears of it on its next Publish request (§5.13.1.2).
+    auto r = f.publish();
+    EXPECT_EQ(r.subscriptionId, sub);
+    EXPECT_EQ(statusChangesOf(r), std::vector<StatusCode>{status::BadTimeout});
     EXPECT_EQ(errorOf([&] { f.publish(); }), StatusCode(status::BadNoSubscription));
+}
+
+TEST(Subscriptions, TransferToAnotherSessionWithInitialValues) {
+    Fixture f;
+    UInt32 sub = f.subscribe(20, 10);
+    ASSERT_TRUE(f.monitor(sub, f.dbl, 7).statusCode.isGood());
+    auto first = f.publishData();  // the first value, not acknowledged
+    ASSERT_EQ(dataOf(first).size(), 1u);
+    const UInt32 seq = first.notificationMessage.sequenceNumber;
+
+    Client b;
+    b.connect(url(f.server));
+    TransferSubscriptionsRequest t;
+    t.subscriptionIds = {sub, sub + 99};
+    t.sendInitialValues = true;
+    auto tr = b.request(t);
+    ASSERT_EQ(tr.results.size(), 2u);
+    EXPECT_EQ(tr.results[0].statusCode, StatusCode(status::Good));
+    EXPECT_EQ(tr.results[0].availableSequenceNumbers, std::vector<UInt32>{seq});
+    EXPECT_EQ(tr.results[1].statusCode, StatusCode(status::BadSubscriptionIdInvalid));
+
+    // B receives the current value again, although it did not change.
+    auto r = publishData(b);
+    EXPECT_EQ(r.subscriptionId, sub);
+    auto d = dataOf(r);
+    ASSERT_EQ(d.size(), 1u);
+    EXPECT_EQ(d[0].clientHandle, 7u);
+    EXPECT_EQ(doubleOf(d[0]), 0.0);
+    f.server.addressSpace().setValue(f.dbl, DataValue(Variant(Double{4})));
+    d = dataOf(publishData(b));
+    ASSERT_EQ(d.size(), 1u);
+    EXPECT_EQ(doubleOf(d[0]), 4.0);
+
+    // A is told on its next Publish request, and has no subscription left.
+    auto a = f.publish();
+    EXPECT_EQ(a.subscriptionId, sub);
+    EXPECT_EQ(statusChangesOf(a), std::vector<StatusCode>{status::GoodSubscriptionTransferred});
+    EXPECT_EQ(errorOf([&] { f.publish(); }), StatusCode(status::BadNoSubscription));
+    DeleteSubscriptionsRequest del;
+    del.subscriptionIds = {sub};
+    EXPECT_EQ(f.c.request(del).results.at(0), StatusCode(status::BadSubscriptionIdInvalid));
+    EXPECT_EQ(b.request(del).results.at(0), StatusCode(status::Good));
+}
+
+TEST(Subscriptions, TransferAnswersAWaitingPublishOfTheOldSession) {
+    Fixture f;
+    UInt32 sub = f.subscribe(1000, 100);  // no keep-alive for a long time
+    f.publish();                          // the first keep-alive
+    std::atomic<bool> done{false};
+    PublishResponse a;
+    StatusCode aError;
+    std::thread waiting([&] {
+        aError = errorOf([&] { a = f.publish(); });
+        done = true;
+    });
+    for (int i = 0; i < 300 && f.server.subscriptions().statistics().queuedPublishRequests == 0;
+         ++i)
+        std::this_thread::sleep_for(10ms);
+    Client b;
+    b.connect(url(f.server));
+    TransferSubscriptionsRequest t;
+    t.subscriptionIds = {sub};
+    EXPECT_EQ(b.request(t).results.at(0).statusCode, StatusCode(status::Good));
+    waiting.join();
+    EXPECT_TRUE(done);
+    EXPECT_EQ(aError, StatusCode(status::Good));
+    EXPECT_EQ(a.subscriptionId, sub);
+    EXPECT_EQ(statusChangesOf(a), std::vector<StatusCode>{status::GoodSubscriptionTransferred});
+}
+
+TEST(Subscriptions, TransferNeedsTheSameUser) {
+    auto cfg = testConfig();
+    cfg.accessControl = std::make_shared<server::DefaultAccessControl>(
+        true, std::map<std::string, std::string>{{"alice", "a"}, {"bob", "b"}});
+    server::Server server(cfg);
+    server.start();
+    Client anon, alice, alice2, bob;
+    anon.connect(url(server));
+    alice.connect(url(server), client::UserName{"alice", "a"});
+    alice2.connect(url(server), client::UserName{"alice", "a"});
+    bob.connect(url(server), client::UserName{"bob", "b"});
+    const CreateSubscriptionRequest cs = quietSubscription();
+    const UInt32 anonSub = anon.request(cs).subscriptionId;
+    const UInt32 aliceSub = alice.request(cs).subscriptionId;
+    TransferSubscriptionsRequest t;
+    t.subscriptionIds = {anonSub, aliceSub};
+    auto byBob = bob.request(t);
+    ASSERT_EQ(byBob.results.size(), 2u);
+    EXPECT_EQ(byBob.results[0].statusCode, StatusCode(status::BadUserAccessDenied));
+    EXPECT_EQ(byBob.results[1].statusCode, StatusCode(status::BadUserAccessDenied));
+    auto byAnon = anon.request(t);
+    EXPECT_EQ(byAnon.results.at(0).statusCode, StatusCode(status::Good));  // its own
+    EXPECT_EQ(byAnon.results.at(1).statusCode, StatusCode(status::BadUserAccessDenied));
+    auto byAlice2 = alice2.request(t);
+    EXPECT_EQ(byAlice2.results.at(0).statusCode, StatusCode(status::BadUserAccessDenied));
+    EXPECT_EQ(byAlice2.results.at(1).statusCode, StatusCode(status::Good));
+    // Bounded like the other subscription services.
+    t.subscriptionIds.assign(cfg.subscriptionLimits.maxMonitoredItemsPerCall + 1, anonSub);
+    EXPECT_EQ(errorOf([&] { bob.request(t); }), StatusCode(status::BadTooManyOperations));
+    t.subscriptionIds.clear();
+    EXPECT_EQ(errorOf([&] { bob.request(t); }), StatusCode(status::BadNothingToDo));
+}
+
+TEST(Subscriptions, CloseSessionCanKeepSubscriptionsForATransfer) {
+    Fixture f;
+    const UInt32 kept = f.subscribe(1000, 10);  // lifetime 30 s
+    ASSERT_TRUE(f.monitor(kept, f.dbl, 3).statusCode.isGood());
+    const UInt32 expiring = f.subscribe(50, 4);  // lifetime 12 x 50 ms
+    CloseSessionRequest close;
+    close.deleteSubscriptions = false;
+    f.c.request(close);
+    EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 2u);
+    // Orphaned subscriptions keep counting their lifetime.
+    for (int i = 0; i < 300 && f.server.subscriptions().statistics().subscriptions != 1; ++i)
+        std::this_thread::sleep_for(10ms);
+    EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 1u);
+
+    f.server.addressSpace().setValue(f.dbl, DataValue(Variant(Double{8})));
+    Client b;
+    b.connect(url(f.server));
+    TransferSubscriptionsRequest t;
+    t.subscriptionIds = {kept, expiring};
+    t.sendInitialValues = true;
+    auto tr = b.request(t);
+    ASSERT_EQ(tr.results.size(), 2u);
+    EXPECT_EQ(tr.results[0].statusCode, StatusCode(status::Good));
+    EXPECT_EQ(tr.results[1].statusCode, StatusCode(status::BadSubscriptionIdInvalid));
+    auto r = publishData(b);
+    EXPECT_EQ(r.subscriptionId, kept);
+    auto d = dataOf(r);
+    ASSERT_FALSE(d.empty());
+    EXPECT_EQ(d.back().clientHandle, 3u);
+    EXPECT_EQ(doubleOf(d.back()), 8.0);
 }
 
 TEST(Subscriptions, PublishingDisabledSendsKeepAlivesOnly) {
@@ -724,4 +875,25 @@ TEST(Subscriptions, TooManyAcknowledgementsAreRefused) {
         lim.maxSubscriptionsPerSession * lim.maxRetransmissionQueue + 1, {sub, 1});
     EXPECT_EQ(errorOf([&] { f.publish(acks); }), StatusCode(status::BadTooManyOperations));
     EXPECT_EQ(f.server.subscriptions().statistics().subscriptions, 1u);
+}
+
+TEST(Subscriptions, KeptSubscriptionsAreBounded) {
+    auto cfg = testConfig();
+    cfg.subscriptionLimits.maxKeptSubscriptions = 1;
+    server::Server server(cfg);
+    server.start();
+    const CreateSubscriptionRequest cs = quietSubscription();
+    CloseSessionRequest close;
+    close.deleteSubscriptions = false;
+    Client a, b;
+    a.connect(url(server));
+    b.connect(url(server));
+    a.request(cs);
+    a.request(cs);
+    b.request(cs);
+    EXPECT_EQ(server.subscriptions().statistics().subscriptions, 3u);
+    a.request(close);
+    EXPECT_EQ(server.subscriptions().statistics().subscriptions, 2u);  // one of a's is kept
+    b.request(close);
+    EXPECT_EQ(server.subscriptions().statistics().subscriptions, 1u);  // no room for b's
 }
