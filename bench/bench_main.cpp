@@ -249,6 +249,13 @@ class ServerProcess {
     ServerProcess(const ServerProcess&) = delete;
     ServerProcess& operator=(const ServerProcess&) = delete;
 
+    // Stops the process (SIGTERM) and returns what it wrote on stderr.
+    std::string stopAndReadLog() {
+        stopProcess(proc_);
+        std::ifstream in(logPath_);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+    }
+
     pid_t pid() const { return proc_.pid; }
     std::uint16_t port() const { return port_; }
     std::int64_t spawnNs() const { return proc_.spawnNs; }
@@ -826,6 +833,14 @@ int run(Options o) {
                                          " value changes arrived in time");
         }
         baselines();
+        // The server's part: its ticker thread times setValue(), which writes the change.
+        double serverSetValueUs = -1;
+        {
+            const std::string log = ticker.stopAndReadLog();
+            const auto at = log.find("setValue on the ticker: median ");
+            if (at != std::string::npos)
+                serverSetValueUs = std::strtod(log.c_str() + at + 31, nullptr);
+        }
         changeNs.erase(changeNs.begin(), changeNs.begin() + warm);
         for (auto* v : {&changeNs, &rawNs, &pacedNs, &tickNs})
             for (auto& x : *v) x /= 1000.0;
@@ -844,6 +859,9 @@ int run(Options o) {
             std::printf("\n");
         };
         row("change -> callback", res.change, false);
+        if (serverSetValueUs >= 0)
+            std::printf("    of which setValue() in the server (the write included) median %7.1f\n",
+                        serverSetValueUs);
         const std::string every = " every " + std::to_string(kTickMs) + " ms";
         row(("raw RTT, one" + every + " (baseline)").c_str(), res.changeRaw, true);
         row(("raw one-way tick" + every + " (info)").c_str(), res.changeRawTick, true);
