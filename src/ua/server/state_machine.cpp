@@ -107,6 +107,9 @@ struct FiniteStateMachine::Impl {
         const NodeId type = firstTarget(as, machine, ns0::HasTypeDefinition);
         if (type.isNull() || !isA(as, type, ns0::FiniteStateMachineType))
             fail("its type " + describe(type) + " is not a FiniteStateMachineType");
+        if (!options.eventType.isNull() && !isA(as, options.eventType, ns0::TransitionEventType))
+            fail("Options::eventType " + describe(options.eventType) +
+                 " is not a TransitionEventType");
         DataValue name = as.readAttribute(machine, AttributeId::BrowseName);
         if (const auto* q = name.value ? name.value->scalar<QualifiedName>() : nullptr)
             machineName = q->name;

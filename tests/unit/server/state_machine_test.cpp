@@ -433,6 +433,11 @@ TEST(StateMachine, BadSetupsThrowClearErrors) {
     EXPECT_THROW(
         FiniteStateMachine(srv, program, FiniteStateMachine::Options{.initialState = "Nope"}),
         server::StateMachineError);
+    // An event type that is not a TransitionEventType.
+    EXPECT_THROW(
+        FiniteStateMachine(
+            srv, program, FiniteStateMachine::Options{.eventType = NodeId(0, ns0::BaseObjectType)}),
+        server::StateMachineError);
     // A type without states and no description.
     const NodeId empty =
         as.addObjectType(NodeId(0, ns0::FiniteStateMachineType), NodeId(1, "EmptyMachineType"),
