@@ -349,6 +349,14 @@ void addProgram(server::Server& server, UInt16 ns) {
         as.instantiate(demo, NodeId(0, ns0::ProgramStateMachineType), NodeId(ns, "Demo.Program"),
                        QualifiedName{ns, "Program"}, o);
     as.addReference(demo, NodeId(0, ns0::HasEventSource), program);
+    // The program's Mandatory properties (OPC 10000-10 §5.2.1): not deletable, not recycled.
+    auto set = [&](const char* property, Variant value) {
+        if (auto p = as.resolvePath(program, std::vector<QualifiedName>{{0, property}}))
+            as.setValue(*p, DataValue(std::move(value)));
+    };
+    set("Deletable", Variant(false));
+    set("AutoDelete", Variant(false));
+    set("RecycleCount", Variant(Int32{0}));
     auto machine = std::make_shared<server::FiniteStateMachine>(server, program);
     for (const char* method : {"Start", "Suspend", "Resume", "Halt", "Reset"}) {
         as.setMethodHandler(
