@@ -62,8 +62,6 @@ NodeId childId(const NodeId& parent, const std::string& name) {
     return NodeId(parent.namespaceIndex(), UInt32{0});
 }
 
-std::string describe(const NodeId& id) { return id.toString(); }
-
 }  // namespace
 
 struct FiniteStateMachine::Impl {
@@ -99,16 +97,16 @@ struct FiniteStateMachine::Impl {
 
     // ---- setup ----------------------------------------------------------------------------
     [[noreturn]] void fail(const std::string& what) const {
-        throw StateMachineError("state machine " + describe(machine) + ": " + what);
+        throw StateMachineError("state machine " + machine.toString() + ": " + what);
     }
 
     NodeId checkMachine() {
-        if (as.nodeClass(machine) != NodeClass::Object) fail("no such Object");
+        if (as.nodeClass(machine) != NodeClass::Object) fail("not an Object of this address space");
         const NodeId type = firstTarget(as, machine, ns0::HasTypeDefinition);
         if (type.isNull() || !isA(as, type, ns0::FiniteStateMachineType))
-            fail("its type " + describe(type) + " is not a FiniteStateMachineType");
+            fail("its type " + type.toString() + " is not a FiniteStateMachineType");
         if (!options.eventType.isNull() && !isA(as, options.eventType, ns0::TransitionEventType))
-            fail("Options::eventType " + describe(options.eventType) +
+            fail("Options::eventType " + options.eventType.toString() +
                  " is not a TransitionEventType");
         DataValue name = as.readAttribute(machine, AttributeId::BrowseName);
         if (const auto* q = name.value ? name.value->scalar<QualifiedName>() : nullptr)
@@ -155,7 +153,7 @@ struct FiniteStateMachine::Impl {
                 }
             }
         }
-        if (states.empty()) fail("its type " + describe(type) + " defines no states");
+        if (states.empty()) fail("its type " + type.toString() + " defines no states");
         for (const auto& r : transitionRefs) {
             Transition tr;
             tr.node = r.nodeId.nodeId;
@@ -218,7 +216,7 @@ struct FiniteStateMachine::Impl {
                 if (o.browseName.name == t.name)
                     fail("transition " + t.name + " is described twice");
             if (!t.eventType.isNull() && !isA(as, t.eventType, ns0::TransitionEventType))
-                fail("transition " + t.name + ": " + describe(t.eventType) +
+                fail("transition " + t.name + ": " + t.eventType.toString() +
                      " is not a TransitionEventType");
             ObjectAttributes a;
             a.displayName = t.displayName.text.empty() ? LocalizedText("", t.name) : t.displayName;
