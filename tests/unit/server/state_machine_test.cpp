@@ -530,3 +530,58 @@ TEST(StateMachine, ConcurrentTransitionsFromApplicationThreadsAndClients) {
     EXPECT_EQ(f.text({"CurrentState"}), state);
     EXPECT_EQ(f.id({"CurrentState", "Id"}), f.fsm->currentState().node);
 }
+
+// A machine type built by the application (as a NodeSet2 file would define one): states and
+// transitions as components of the type, the initial state an InitialStateType, the cause
+// method a Mandatory component that instantiate copies.
+TEST(StateMachine, StatesFromAnApplicationDefinedType) {
+    server::Server srv(localConfig());
+    auto& as = srv.addressSpace();
+    const NodeId type =
+        as.addObjectType(NodeId(0, ns0::FiniteStateMachineType), NodeId(1, "ValveStateMachineType"),
+                         QualifiedName{1, "ValveStateMachineType"});
+    auto state = [&](const char* name, UInt32 stateType, UInt32 number) {
+        NodeId s =
+            as.addObject(type, NodeId(1, std::string("Valve.") + name), QualifiedName{1, name}, {},
+                         NodeId(0, stateType), NodeId(0, ns0::HasComponent));
+        as.setValue(*as.resolvePath(s, std::vector<QualifiedName>{n0("StateNumber")}),
+                    DataValue(Variant(number)));
+        return s;
+    };
+    const NodeId closed = state("Closed", ns0::InitialStateType, 1);
+    const NodeId opened = state("Opened", ns0::StateType, 2);
+    const NodeId method =
+        as.addMethod(type, NodeId(1, "Valve.OpenValve"), QualifiedName{1, "OpenValve"}, {}, {}, {});
+    as.addReference(method, NodeId(0, ns0::HasModellingRule),
+                    NodeId(0, ns0::ModellingRule_Mandatory));
+    const NodeId transition =
+        as.addObject(type, NodeId(1, "Valve.ClosedToOpened"), QualifiedName{1, "ClosedToOpened"},
+                     {}, NodeId(0, ns0::TransitionType), NodeId(0, ns0::HasComponent));
+    as.setValue(*as.resolvePath(transition, std::vector<QualifiedName>{n0("TransitionNumber")}),
+                DataValue(Variant(UInt32{7})));
+    as.addReference(transition, NodeId(0, ns0::FromState), closed);
+    as.addReference(transition, NodeId(0, ns0::ToState), opened);
+    as.addReference(transition, NodeId(0, ns0::HasCause), method);
+
+    const NodeId valve = as.instantiate(NodeId(0, ns0::ObjectsFolder), type, NodeId(1, "V1"),
+                                        QualifiedName{1, "V1"});
+    FiniteStateMachine fsm(srv, valve);
+    ASSERT_EQ(fsm.states().size(), 2u);
+    ASSERT_EQ(fsm.transitions().size(), 1u);
+    EXPECT_EQ(fsm.currentState().node, closed) << "the InitialStateType state";
+    const NodeId copy = fsm.method("OpenValve");
+    ASSERT_FALSE(copy.isNull());
+    EXPECT_NE(copy, method) << "the instance's copy of the method";
+    srv.start();
+    client::Client c;
+    c.connect(srv.endpointUrl());
+    EXPECT_EQ(c.call(valve, copy, {}).status, status::Good);
+    EXPECT_EQ(fsm.currentState().node, opened);
+    const NodeId current = *as.resolvePath(valve, std::vector<QualifiedName>{n0("CurrentState")});
+    Variant v = c.readValue(current);
+    ASSERT_NE(v.scalar<LocalizedText>(), nullptr);
+    EXPECT_EQ(v.scalar<LocalizedText>()->text, "Opened");
+    ASSERT_TRUE(fsm.lastTransition().has_value());
+    EXPECT_EQ(fsm.lastTransition()->number, 7u);
+    EXPECT_EQ(c.call(valve, copy, {}).status, status::BadNotExecutable);
+}
