@@ -2,9 +2,10 @@
 "use strict";
 // node-opcua subscriber: subscribes on a server that exposes the pnp demo namespace with
 // its live parts (Demo.Counter, Demo.FireEvent, DemoEventType with the custom field
-// Sequence; see src/ua/demo/demo.hpp) to data changes and to events, transfers the
-// subscription to a second session and back (TransferSubscriptions), and prints one
-// TAP-like line per check (the format of node_client.js, so scripts/test.sh counts them):
+// Sequence, the Demo.Program state machine; see src/ua/demo/demo.hpp) to data changes and
+// to events, transfers the subscription to a second session and back (TransferSubscriptions),
+// and prints one TAP-like line per check (the format of node_client.js, so scripts/test.sh
+// counts them):
 //   ok - <name> | not ok - <name>: <reason> | skip - <name>: <reason>
 // then "node_client: N passed, N failed, N skipped" (the summary scripts/test.sh reads).
 // Exit 0 only if every check passed. Bounded by PNP_CLIENT_DEADLINE_MS (default 45 s).
@@ -31,6 +32,7 @@ const {
     Variant,
     StatusCodes,
     coerceNodeId,
+    makeBrowsePath,
 } = require("node-opcua");
 
 const url = urlArg("node_subscriber.js");
@@ -210,6 +212,49 @@ async function main() {
         } finally {
             await other.close(true);
         }
+    });
+
+    await check("Demo.Program (ProgramStateMachineType): CurrentState and a transition event per method call", async () => {
+        const program = id("Demo.Program");
+        const child = async (name) => {
+            const r = await session.translateBrowsePath(makeBrowsePath(program, `/${name}`));
+            expect(r.statusCode.isGood() && r.targets.length === 1, `${name}: ${r.statusCode.toString()}`);
+            return r.targets[0].targetId;
+        };
+        const currentState = await child("CurrentState");
+        const currentStateId = await child("CurrentState.Id");
+        const state = async () => (await session.read({ nodeId: currentState, attributeId: AttributeIds.Value })).value.value.text;
+        expect((await state()) === "Ready", `CurrentState ${await state()}`);
+        const idValue = (await session.read({ nodeId: currentStateId, attributeId: AttributeIds.Value })).value.value;
+        expect(idValue.toString() === "ns=0;i=2400", `CurrentState/Id ${idValue.toString()}`);
+
+        const ofType = new ContentFilterElement({
+            filterOperator: FilterOperator.OfType,
+            filterOperands: [
+                new LiteralOperand({ value: new Variant({ dataType: DataType.NodeId, value: coerceNodeId("i=2311") }) }),
+            ],
+        });
+        const item = ClientMonitoredItem.create(
+            subscription,
+            { nodeId: id("Demo"), attributeId: AttributeIds.EventNotifier },
+            { samplingInterval: 0, queueSize: 100, filter: constructEventFilter(["EventType", "Transition", "FromState", "ToState"], ofType) },
+            TimestampsToReturn.Both,
+        );
+        await created(item);
+        const got = collect(item, 3);
+        for (const method of ["Start", "Halt", "Reset"]) {
+            const result = await session.call({ objectId: program, methodId: await child(method), inputArguments: [] });
+            expect(result.statusCode.isGood(), `${method}: ${result.statusCode.toString()}`);
+        }
+        const again = await session.call({ objectId: program, methodId: await child("Resume"), inputArguments: [] });
+        expect(again.statusCode.isBad(), `Resume in Ready: ${again.statusCode.toString()}`);
+        const events = await got;
+        const seen = events.map((f) => `${f[1].value.text}:${f[2].value.text}->${f[3].value.text}`).join(", ");
+        expect(seen === "ReadyToRunning:Ready->Running, RunningToHalted:Running->Halted, HaltedToReady:Halted->Ready",
+            `events ${seen}`);
+        expect(events[0][0].value.toString() === "ns=0;i=2378", `EventType ${events[0][0].toString()}`);
+        expect((await state()) === "Ready", `CurrentState ${await state()}`);
+        await item.terminate();
     });
 
     await check("DeleteSubscriptions and close the session", async () => {

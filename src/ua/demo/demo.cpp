@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "ua/server/state_machine.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
 #include "ua/types/status_codes.hpp"
@@ -332,6 +333,40 @@ void addEventNodes(server::Server& server, UInt16 ns,
         m);
 }
 
+// Demo.Program: a ProgramStateMachineType instance (OPC 10000-10) whose Start / Suspend /
+// Resume / Halt / Reset methods move it between Ready, Running, Suspended and Halted and fire
+// a ProgramTransitionEventType event at Demo each time. The state machine belongs to the
+// method handlers (so to the address space): each handler holds it and takes the transition
+// the method causes.
+void addProgram(server::Server& server, UInt16 ns) {
+    AddressSpace& as = server.addressSpace();
+    const NodeId demo(ns, "Demo");
+    server::InstantiateOptions o;
+    o.displayName = LocalizedText("en", "Program");
+    o.optionalChildren = {QualifiedName{0, "AvailableStates"},
+                          QualifiedName{0, "AvailableTransitions"}};
+    const NodeId program =
+        as.instantiate(demo, NodeId(0, ns0::ProgramStateMachineType), NodeId(ns, "Demo.Program"),
+                       QualifiedName{ns, "Program"}, o);
+    as.addReference(demo, NodeId(0, ns0::HasEventSource), program);
+    // The program's Mandatory properties (OPC 10000-10 §5.2.1): not deletable, not recycled.
+    auto set = [&](const char* property, Variant value) {
+        if (auto p = as.resolvePath(program, std::vector<QualifiedName>{{0, property}}))
+            as.setValue(*p, DataValue(std::move(value)));
+    };
+    set("Deletable", Variant(false));
+    set("AutoDelete", Variant(false));
+    set("RecycleCount", Variant(Int32{0}));
+    auto machine = std::make_shared<server::FiniteStateMachine>(server, program);
+    for (const char* method : {"Start", "Suspend", "Resume", "Halt", "Reset"}) {
+        as.setMethodHandler(
+            machine->method(method),
+            server::makeMethodHandler(
+                [machine, method](const server::MethodCallContext&, std::vector<Variant>&,
+                                  std::vector<Variant>&) { return machine->fire(method); }));
+    }
+}
+
 }  // namespace
 
 // Demo.Counter +1 every 100 ms, a "tick" event every second (a live source for `pnp ua
@@ -405,6 +440,7 @@ DemoNamespace::DemoNamespace(server::Server& server, DemoOptions options)
     : DemoNamespace(server.addressSpace(), options) {
     auto sequence = std::make_shared<std::atomic<UInt32>>(0);
     addEventNodes(server, ns_, sequence);
+    addProgram(server, ns_);
     ticker_ = std::make_unique<DemoTicker>(server, ns_, sequence);
 }
 
@@ -427,6 +463,7 @@ std::size_t DemoNamespace::pendingSleeps() const { return worker_->pending(); }
 UInt16 addDemoNamespace(server::Server& server, const DemoOptions& options) {
     UInt16 ns = addDemoNamespace(server.addressSpace(), options);
     addEventNodes(server, ns, std::make_shared<std::atomic<UInt32>>(0));
+    addProgram(server, ns);
     return ns;
 }
 

@@ -19,6 +19,11 @@
 //                  DemoEventType event at Demo; the ticker fires one every second too
 //     s=DemoEventType ObjectType, subtype of BaseEventType, Property Sequence (UInt32): a
 //                  custom field, counting the demo's events
+//     s=Demo.Program  ProgramStateMachineType instance (OPC 10000-10; a
+//                  server::FiniteStateMachine): methods Start/Suspend/Resume/Halt/Reset move
+//                  it between Ready/Running/Suspended/Halted; CurrentState, LastTransition,
+//                  AvailableStates/Transitions follow; each transition fires a
+//                  ProgramTransitionEventType event (source Demo.Program, notifier Demo)
 //
 // Demo.Sleep completes ASYNCHRONOUSLY: the handler returns at once and a worker thread
 // completes the call when the time is up, so a long method never blocks the server's network

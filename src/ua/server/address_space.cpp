@@ -876,6 +876,17 @@ void AddressSpace::setValueListener(ValueListener listener) {
     impl_->valueListener = std::move(listener);
 }
 
+StatusCode AddressSpace::setExecutable(const NodeId& method, bool executable) {
+    auto lock = impl_->lockForChange();
+    Impl& s = *impl_;
+    NodeIndex i = s.find(method);
+    if (i == kNoNode) return status::BadNodeIdUnknown;
+    if (s.nodes[i].nodeClass != NodeClassBits::Method) return status::BadMethodInvalid;
+    s.nodes[i].set(Node::kExecutable, executable);
+    s.nodes[i].set(Node::kUserExecutable, executable);
+    return status::Good;
+}
+
 void AddressSpace::setMethodHandler(const NodeId& method, MethodHandler handler) {
     auto lock = impl_->lockForChange();
     Impl& s = *impl_;

@@ -13,7 +13,8 @@
 //   addNamespace, namespaceArray, addObject, addVariable, addProperty, addMethod,
 //   addObjectType, addVariableType, addReferenceType, addDataType, addView, instantiate,
 //   addReference, deleteReference, deleteNode, setValue, readValue, setValueCallback,
-//   setMethodHandler. NodeSet2 XML files: loadNodeSetXml() in ua/server/nodeset_xml.hpp.
+//   setMethodHandler, setExecutable. NodeSet2 XML files: loadNodeSetXml() in
+//   ua/server/nodeset_xml.hpp.
 //
 // Thread safety: every public member function may be called from any thread. The address
 // space is guarded by one reader/writer lock: Browse, TranslateBrowsePaths and Read take it
@@ -332,6 +333,9 @@ class AddressSpace {
     // Serves the value from callbacks (replaces previous callbacks; empty to remove).
     void setValueCallback(const NodeId& variable, ValueCallbacks callbacks);
     void setMethodHandler(const NodeId& method, MethodHandler handler);
+    // Sets a Method's Executable and UserExecutable attributes (no WriteMask check, unlike
+    // writeAttribute). Bad_NodeIdUnknown / Bad_MethodInvalid instead of throwing.
+    StatusCode setExecutable(const NodeId& method, bool executable);
     // Told of every stored value change (setValue, Write) - for the subscription engine.
     // Called with the address space locked exclusively: it must be quick and must not call
     // back into the AddressSpace. One listener; empty to remove.
