@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <array>
 #include <climits>
+#include <deque>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <thread>
@@ -29,34 +31,57 @@ constexpr std::string_view kSecurityPolicyNone = "http://opcfoundation.org/UA/Se
 constexpr UInt32 kNodeRoot = 84;
 constexpr std::size_t kNonceLength = 32;
 
+// Where every callback of one client runs: in the order the responses arrived, one at a time,
+// on whichever thread first has some to run (the background thread, or a blocking call that
+// read responses for others). A second thread only queues them for the first: two
+// notifications of one subscription never run concurrently or out of order.
+class CompletionQueue {
+  public:
+    // Runs `items` after those queued before (by this thread, or queued for the thread
+    // already running callbacks). Returns how many this thread ran.
+    std::size_t run(std::vector<std::function<void()>>& items) noexcept {
+        std::unique_lock lock(mutex_);
+        for (auto& f : items) queue_.push_back(std::move(f));
+        items.clear();
+        if (running_) return 0;  // that thread runs them next, in order
+        running_ = true;
+        std::size_t n = 0;
+        while (!queue_.empty()) {
+            std::function<void()> f = std::move(queue_.front());
+            queue_.pop_front();
+            lock.unlock();
+            try {
+                f();
+            } catch (...) {
+                // Callbacks must not throw; there is nobody to report it to.
+            }
+            ++n;
+            lock.lock();
+        }
+        running_ = false;
+        return n;
+    }
+
+  private:
+    std::mutex mutex_;
+    std::deque<std::function<void()>> queue_;
+    bool running_ = false;
+};
+
 // Callbacks collected while the lock is held and run after it was released (the object is
-// declared before the lock, so it is destroyed after the lock).
+// declared before the lock, so it is destroyed after the lock), through the client's queue.
 class Completions {
   public:
-    Completions() = default;
+    explicit Completions(CompletionQueue& queue) : queue_(queue) {}
     Completions(const Completions&) = delete;
     Completions& operator=(const Completions&) = delete;
     ~Completions() { run(); }
 
     void add(std::function<void()> f) { items_.push_back(std::move(f)); }
-    std::size_t run() noexcept {
-        std::size_t n = 0;
-        while (!items_.empty()) {
-            std::vector<std::function<void()>> items;
-            items.swap(items_);
-            for (auto& f : items) {
-                try {
-                    f();
-                } catch (...) {
-                    // Callbacks must not throw; there is nobody to report it to.
-                }
-                ++n;
-            }
-        }
-        return n;
-    }
+    std::size_t run() noexcept { return queue_.run(items_); }
 
   private:
+    CompletionQueue& queue_;
     std::vector<std::function<void()>> items_;
 };
 
@@ -126,6 +151,7 @@ class Client::Impl {
 
     ClientConfig config;
     mutable std::mutex mutex;
+    CompletionQueue completions;  // every callback runs through it (order, one at a time)
     std::unique_ptr<transport::ClientConnection> conn;  // null: no channel
     std::uint64_t generation = 0;                       // of conn, +1 per new channel
     std::string url;
@@ -643,7 +669,7 @@ class Client::Impl {
         short revents = 0;  // of the socket, from the last poll()
         std::uint64_t watched = 0;
         for (;;) {
-            Completions done;
+            Completions done(completions);
             Clock::time_point until;
             int fd = -1;
             short events = 0;
@@ -721,7 +747,7 @@ const DecodeLimits& Client::decodeLimits() const { return impl_->config.decodeLi
 
 void Client::connect(std::string_view endpointUrl, Identity identity, Deadline deadline) {
     Impl& s = *impl_;
-    Completions done;
+    Completions done(s.completions);
     std::lock_guard lock(s.mutex);
     if (s.wantConnected || s.conn) s.close(done);
     Clock::time_point dl = deadline.resolve(Clock::now(), s.config.connectTimeout);
@@ -742,7 +768,7 @@ void Client::connect(std::string_view endpointUrl, Identity identity, Deadline d
 
 void Client::disconnect() noexcept {
     if (!impl_) return;
-    Completions done;
+    Completions done(impl_->completions);
     std::lock_guard lock(impl_->mutex);
     impl_->close(done);
 }
@@ -787,7 +813,7 @@ ClientStats Client::stats() const {
 void Client::roundTrip(EncodeRef encode, DecodeRef decode, bool idempotent, Deadline deadline,
                        std::string_view service) {
     Impl& s = *impl_;
-    Completions done;  // run after the lock is released
+    Completions done(s.completions);  // run after the lock is released
     std::lock_guard lock(s.mutex);
     s.resolvedAt = Clock::now();
     Clock::time_point dl = deadline.resolve(s.resolvedAt, s.config.requestTimeout);
@@ -797,7 +823,7 @@ void Client::roundTrip(EncodeRef encode, DecodeRef decode, bool idempotent, Dead
 void Client::sendAsync(EncodeRef encode, Deadline deadline, std::string_view service,
                        RawCallback callback) {
     Impl& s = *impl_;
-    Completions done;
+    Completions done(s.completions);
     std::lock_guard lock(s.mutex);
     s.resolvedAt = Clock::now();
     Clock::time_point dl = deadline.resolve(s.resolvedAt, s.config.requestTimeout);
@@ -813,7 +839,7 @@ IncomingResponse Client::discoveryRoundTrip(std::string_view url, EncodeRef enco
     Impl& s = *impl_;
     Clock::time_point dl;
     {
-        Completions done;
+        Completions done(s.completions);
         std::lock_guard lock(s.mutex);
         dl = deadline.resolve(Clock::now(), s.config.requestTimeout);
         if (url.empty() || (s.wantConnected && url == s.url)) {
@@ -1212,7 +1238,7 @@ std::size_t Client::runIterate(milliseconds timeout) {
         Clock::time_point until;
         int fd = -1;
         {
-            Completions done;
+            Completions done(s.completions);
             {
                 std::lock_guard lock(s.mutex);
                 s.ensureWakeFd();

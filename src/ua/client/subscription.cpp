@@ -12,6 +12,26 @@ namespace {
 
 constexpr UInt32 kBaseEventType = 2041;
 constexpr UInt32 kMaxRepublishPerGap = 32;
+constexpr std::size_t kMaxMissing = 64;  // per subscription
+
+// Under the engine's lock: sequence numbers from..to are awaited (bounded: the oldest go).
+void markMissing(SubscriptionState& sub, UInt32 from, UInt32 to) {
+    for (UInt32 seq = from; seq <= to && seq >= from; ++seq)
+        if (std::find(sub.missing.begin(), sub.missing.end(), seq) == sub.missing.end())
+            sub.missing.push_back(seq);
+    if (sub.missing.size() > kMaxMissing)
+        sub.missing.erase(
+            sub.missing.begin(),
+            sub.missing.begin() + static_cast<std::ptrdiff_t>(sub.missing.size() - kMaxMissing));
+}
+
+// Under the engine's lock: true (and no longer awaited) when `seq` was missing.
+bool takeMissing(SubscriptionState& sub, UInt32 seq) {
+    auto it = std::find(sub.missing.begin(), sub.missing.end(), seq);
+    if (it == sub.missing.end()) return false;
+    sub.missing.erase(it);
+    return true;
+}
 constexpr UInt32 kMaxConsecutivePublishErrors = 5;
 constexpr std::size_t kItemsPerRequest = 1000;
 
@@ -197,6 +217,7 @@ void SubscriptionEngine::onPublish(Result<PublishResponse> r, std::uint64_t gen)
     std::shared_ptr<SubscriptionState> sub;
     bool refill = false;
     bool keepAlive = false;
+    bool duplicate = false;
     UInt32 gapFrom = 0, gapTo = 0;
     bool serverHasAnother = false;
     std::vector<std::shared_ptr<SubscriptionState>> errorTargets;
@@ -237,10 +258,15 @@ void SubscriptionEngine::onPublish(Result<PublishResponse> r, std::uint64_t gen)
                 if (m.sequenceNumber > expected) {
                     gapFrom = expected;
                     gapTo = std::min(m.sequenceNumber - 1, expected + kMaxRepublishPerGap - 1);
+                    markMissing(*sub, gapFrom, gapTo);
                 }
+                // One that is not above the highest seen is delivered only if it was missing.
+                if (!keepAlive && m.sequenceNumber > 0 && m.sequenceNumber < expected)
+                    duplicate = !takeMissing(*sub, m.sequenceNumber);
                 UInt32 seen = keepAlive ? m.sequenceNumber - 1 : m.sequenceNumber;
                 if (m.sequenceNumber > 0) sub->lastSequence = std::max(sub->lastSequence, seen);
                 if (keepAlive) ++stats_.keepAlives;
+                if (duplicate) ++stats_.duplicates;
             }
             refill = true;
         }
@@ -254,7 +280,7 @@ void SubscriptionEngine::onPublish(Result<PublishResponse> r, std::uint64_t gen)
     if (r.ok() && sub) {
         if (keepAlive)
             report(sub, SubscriptionStatus::Kind::KeepAlive, StatusCode{}, {});
-        else
+        else if (!duplicate)
             dispatch(sub, r.value().notificationMessage);
     }
     if (refill && serverHasAnother) fill();
@@ -341,8 +367,13 @@ void SubscriptionEngine::republish(const std::shared_ptr<SubscriptionState>& sub
                 if (!e || !r.ok()) return;  // BadMessageNotAvailable: gone for good
                 {
                     std::lock_guard lock(e->mutex_);
-                    ++e->stats_.republished;
                     e->acks_.push_back({sub->revised.subscriptionId, seq});
+                    // Arrived meanwhile by Publish (answered out of order): not twice.
+                    if (!takeMissing(*sub, seq)) {
+                        ++e->stats_.duplicates;
+                        return;
+                    }
+                    ++e->stats_.republished;
                 }
                 e->dispatch(sub, r.value().notificationMessage);
             });
@@ -402,7 +433,15 @@ void SubscriptionEngine::recover(SessionChange change) {
                 if (from == 0 || seq < from) from = seq;
                 to = std::max(to, seq);
             }
-            if (from != 0) republish(s, from, std::min(to, from + kMaxRepublishPerGap - 1));
+            if (from != 0) {
+                to = std::min(to, from + kMaxRepublishPerGap - 1);
+                {
+                    std::lock_guard lock(mutex_);
+                    markMissing(*s, from, to);
+                    s->lastSequence = std::max(s->lastSequence, to);
+                }
+                republish(s, from, to);
+            }
             continue;
         }
         UInt32 oldId = s->revised.subscriptionId;
@@ -445,6 +484,7 @@ void SubscriptionEngine::create(SubscriptionState& sub, Deadline deadline) {
     sub.revised = {resp.subscriptionId, resp.revisedPublishingInterval, resp.revisedLifetimeCount,
                    resp.revisedMaxKeepAliveCount};
     sub.lastSequence = 0;
+    sub.missing.clear();
     sub.lost = false;
 }
 

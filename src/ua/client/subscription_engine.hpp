@@ -38,6 +38,9 @@ struct SubscriptionState {
     RevisedSubscription revised;
     SubscriptionStatusCallback onStatus;
     UInt32 lastSequence = 0;  // highest sequence number received
+    // Skipped sequence numbers (asked for by Republish, or arriving late: the server may
+    // answer Publish requests out of order): delivered once, whichever way comes first.
+    std::vector<UInt32> missing;
     std::atomic<bool> lost{false};
     std::map<UInt32, std::shared_ptr<MonitoredItemState>> items;  // by client handle
 };
@@ -46,6 +49,7 @@ struct SubscriptionEngineStats {
     std::uint64_t publishResponses = 0;
     std::uint64_t keepAlives = 0;
     std::uint64_t republished = 0;
+    std::uint64_t duplicates = 0;      // messages received twice (late and republished): dropped
     std::uint64_t unknownHandles = 0;  // notifications for items or subscriptions we do not know
     std::uint64_t malformed = 0;       // notification data that did not decode
 };

@@ -188,7 +188,10 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         if (message.size() < kSymmetricHeaderSize)
             throw std::invalid_argument("ServerConnection::send: buffer without header space");
         if (isClosed()) return;
-        if (server_.holdsNetworkLock()) {
+        // Under the network lock: written here, unless sends of this connection still wait
+        // in the service thread's queue (they were first: e.g. NotificationMessages with
+        // lower sequence numbers) — then queued behind them.
+        if (server_.holdsNetworkLock() && postedSends_.load(std::memory_order_acquire) == 0) {
             sendSplicedHere(requestId, std::move(message), std::move(splices),
                             std::move(keepAlive));
             return;
@@ -198,7 +201,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         // application thread reaches the client without a thread hop. Otherwise queued to
         // the service thread; never waiting for the lock, so that a caller holding locks of
         // its own cannot deadlock with a handler that takes them.
-        if (postedSends_.load(std::memory_order_acquire) == 0) {
+        if (!server_.holdsNetworkLock() && postedSends_.load(std::memory_order_acquire) == 0) {
             NetworkLock lock(server_, std::try_to_lock);
             if (lock.owns()) {
                 sendSplicedHere(requestId, std::move(message), std::move(splices),
