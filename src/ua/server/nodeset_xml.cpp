@@ -129,19 +129,21 @@ class FileLoader {
         if (!r) fail("malformed XML at byte " + std::to_string(r.offset) + ": " + r.description());
         root_ = doc_.document_element();
         if (localName(root_) != "UANodeSet") fail("the root element is not <UANodeSet>");
-        readNamespaces();
-        readAliases();
         const auto first = static_cast<NodeIndex>(s_.nodes.size());
+        const std::size_t namespacesBefore = s_.namespaces.size();
         try {
+            readNamespaces();
+            readAliases();
             createNodes();
             createReferences();
             createDefinitions();
             setValues();
         } catch (...) {
-            // A file loads completely or not at all: drop its nodes and their references
-            // (the namespaces it added stay in the NamespaceArray).
+            // A file loads completely or not at all: drop its nodes, their references and
+            // the namespaces it added (none of the remaining nodes can use them).
             for (auto i = static_cast<NodeIndex>(s_.nodes.size()); i-- > first;)
                 s_.deleteNode(i, false);
+            s_.namespaces.resize(namespacesBefore);
             s_.rememberWellKnownRefTypes();
             throw;
         }

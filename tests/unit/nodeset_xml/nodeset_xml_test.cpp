@@ -283,10 +283,12 @@ TEST_F(NodeSetXmlErrors, AFailedFileLeavesNoNodesBehind) {
     <Value><Int32 xmlns="http://opcfoundation.org/UA/2008/02/Types.xsd">x</Int32></Value></UAVariable>)"));
     AddressSpace space;
     const auto before = space.statistics();
+    const auto namespacesBefore = space.namespaceArray();
     EXPECT_THROW(loadNodeSetXml(space, f, {f.parent_path()}), NodeSetError);
     const auto after = space.statistics();
     EXPECT_EQ(after.nodes, before.nodes);
     EXPECT_EQ(after.references, before.references);
+    EXPECT_EQ(space.namespaceArray(), namespacesBefore) << "the file's namespace stays";
     EXPECT_FALSE(
         space.resolvePath(NodeId(0, ns0::ObjectsFolder), std::vector<QualifiedName>{{2, "Cell"}}));
     EXPECT_FALSE(isModelLoaded(space, "urn:bad"));
