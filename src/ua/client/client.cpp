@@ -31,19 +31,22 @@ constexpr std::string_view kSecurityPolicyNone = "http://opcfoundation.org/UA/Se
 constexpr UInt32 kNodeRoot = 84;
 constexpr std::size_t kNonceLength = 32;
 
-// Where every callback of one client runs: in the order the responses arrived, one at a time,
-// on whichever thread first has some to run (the background thread, or a blocking call that
-// read responses for others). A second thread only queues them for the first: two
-// notifications of one subscription never run concurrently or out of order.
+// Where every callback of one client runs: in the order the responses were read, one at a
+// time, on whichever thread first has some to run (the background thread, or a blocking call
+// that read responses for others). Callbacks are queued where the response is routed (under
+// the client's lock, so in the order the socket delivered them) and run after that lock is
+// released: two notifications of one subscription never run concurrently or out of order.
 class CompletionQueue {
   public:
-    // Runs `items` after those queued before (by this thread, or queued for the thread
-    // already running callbacks). Returns how many this thread ran.
-    std::size_t run(std::vector<std::function<void()>>& items) noexcept {
+    void push(std::function<void()> f) {
+        std::lock_guard lock(mutex_);
+        queue_.push_back(std::move(f));
+    }
+    // Runs what is queued unless another thread is already doing so (it then runs these
+    // too, in order). Returns how many this thread ran.
+    std::size_t drain() noexcept {
         std::unique_lock lock(mutex_);
-        for (auto& f : items) queue_.push_back(std::move(f));
-        items.clear();
-        if (running_) return 0;  // that thread runs them next, in order
+        if (running_) return 0;
         running_ = true;
         std::size_t n = 0;
         while (!queue_.empty()) {
@@ -68,8 +71,8 @@ class CompletionQueue {
     bool running_ = false;
 };
 
-// Callbacks collected while the lock is held and run after it was released (the object is
-// declared before the lock, so it is destroyed after the lock), through the client's queue.
+// Callbacks queued while the client's lock is held and run after it was released (the object
+// is declared before the lock, so it is destroyed after the lock).
 class Completions {
   public:
     explicit Completions(CompletionQueue& queue) : queue_(queue) {}
@@ -77,12 +80,11 @@ class Completions {
     Completions& operator=(const Completions&) = delete;
     ~Completions() { run(); }
 
-    void add(std::function<void()> f) { items_.push_back(std::move(f)); }
-    std::size_t run() noexcept { return queue_.run(items_); }
+    void add(std::function<void()> f) { queue_.push(std::move(f)); }
+    std::size_t run() noexcept { return queue_.drain(); }
 
   private:
     CompletionQueue& queue_;
-    std::vector<std::function<void()>> items_;
 };
 
 bool sessionGone(StatusCode s) {
