@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "support/inbox.hpp"
 #include "support/loopback_server.hpp"
 #include "support/tcp_relay.hpp"
 #include "ua/client/client.hpp"
@@ -20,36 +21,10 @@
 
 using namespace pnp::ua;
 using namespace std::chrono_literals;
+using pnp::testing::Inbox;
 using pnp::testing::loopbackConfig;
 
 namespace {
-
-// Values delivered to callbacks (on the client's background thread), waited for with a
-// deadline.
-template <class T>
-class Inbox {
-  public:
-    void put(T v) {
-        std::lock_guard lock(m_);
-        items_.push_back(std::move(v));
-        cv_.notify_all();
-    }
-    // Waits until pred(items) holds or the timeout passes; returns pred's last result.
-    template <class Pred>
-    bool waitFor(Pred pred, std::chrono::milliseconds timeout = 5s) {
-        std::unique_lock lock(m_);
-        return cv_.wait_for(lock, timeout, [&] { return pred(items_); });
-    }
-    std::vector<T> items() {
-        std::lock_guard lock(m_);
-        return items_;
-    }
-
-  private:
-    std::mutex m_;
-    std::condition_variable cv_;
-    std::vector<T> items_;
-};
 
 // A server with an Int32 variable ns=1;s=Value; the client connects through a relay whose
 // connections can be cut.

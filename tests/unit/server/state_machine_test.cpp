@@ -19,6 +19,8 @@
 #include <tuple>
 #include <vector>
 
+#include "support/inbox.hpp"
+#include "support/loopback_server.hpp"
 #include "ua/client/client.hpp"
 #include "ua/client/subscription.hpp"
 #include "ua/server/server.hpp"
@@ -27,48 +29,18 @@
 
 using namespace pnp::ua;
 using namespace std::chrono_literals;
+using pnp::testing::Inbox;
+using pnp::testing::loopbackConfig;
 using server::FiniteStateMachine;
 
 namespace {
-
-// Items delivered on the client's background thread, waited for with a deadline.
-template <class T>
-class Inbox {
-  public:
-    void put(T v) {
-        std::lock_guard lock(m_);
-        items_.push_back(std::move(v));
-        cv_.notify_all();
-    }
-    bool waitForCount(std::size_t n, std::chrono::milliseconds timeout = 5s) {
-        std::unique_lock lock(m_);
-        return cv_.wait_for(lock, timeout, [&] { return items_.size() >= n; });
-    }
-    std::vector<T> items() {
-        std::lock_guard lock(m_);
-        return items_;
-    }
-
-  private:
-    std::mutex m_;
-    std::condition_variable cv_;
-    std::vector<T> items_;
-};
-
-server::ServerConfig localConfig() {
-    server::ServerConfig c;
-    c.host = "127.0.0.1";
-    c.publicHost = "127.0.0.1";
-    c.port = 0;
-    return c;
-}
 
 QualifiedName n0(const char* name) { return QualifiedName{0, name}; }
 
 // A server with ns=1;s=Program (ProgramStateMachineType, with AvailableStates/Transitions)
 // bound to a FiniteStateMachine, and a connected client.
 struct ProgramFixture {
-    server::Server server{localConfig()};
+    server::Server server{loopbackConfig()};
     NodeId program{1, "Program"};
     std::unique_ptr<FiniteStateMachine> fsm;
     client::Client c;
@@ -330,7 +302,7 @@ TEST(StateMachine, DataChangesOnCurrentState) {
 }
 
 TEST(StateMachine, CustomMachineFromADescription) {
-    server::Server srv(localConfig());
+    server::Server srv(loopbackConfig());
     auto& as = srv.addressSpace();
     const NodeId type = as.addObjectType(NodeId(0, ns0::FiniteStateMachineType),
                                          NodeId(1, "GripperStateMachineType"),
@@ -412,7 +384,7 @@ TEST(StateMachine, CustomMachineFromADescription) {
 }
 
 TEST(StateMachine, BadSetupsThrowClearErrors) {
-    server::Server srv(localConfig());
+    server::Server srv(loopbackConfig());
     auto& as = srv.addressSpace();
     // Not a state machine.
     const NodeId plain =
@@ -538,7 +510,7 @@ TEST(StateMachine, ConcurrentTransitionsFromApplicationThreadsAndClients) {
 // transitions as components of the type, the initial state an InitialStateType, the cause
 // method a Mandatory component that instantiate copies.
 TEST(StateMachine, StatesFromAnApplicationDefinedType) {
-    server::Server srv(localConfig());
+    server::Server srv(loopbackConfig());
     auto& as = srv.addressSpace();
     const NodeId type =
         as.addObjectType(NodeId(0, ns0::FiniteStateMachineType), NodeId(1, "ValveStateMachineType"),
