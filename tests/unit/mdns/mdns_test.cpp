@@ -1,0 +1,427 @@
+// Mdns engines over real sockets: each "host" is a private network namespace, hosts are
+// joined by veth pairs (see netns.hpp). Port 15353, so that a real mDNS responder on the
+// machine is neither disturbed nor heard. Every wait has a deadline.
+#include "mdns/mdns.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "mdns/dns_message.hpp"
+#include "netns.hpp"
+#include "support/inbox.hpp"
+
+using namespace pnp::mdns;
+using namespace pnp::mdns::test;
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+constexpr std::uint16_t kPort = 15353;
+const char* const kType = "_opcua-tcp._tcp";
+
+#define SKIP_WITHOUT_NETNS()                                 \
+    do {                                                     \
+        if (auto why = skipReason(); !why.empty()) {         \
+            GTEST_SKIP() << "mdns namespace tests: " << why; \
+        }                                                    \
+    } while (0)
+
+MdnsConfig config() {
+    MdnsConfig c;
+    c.port = kPort;
+    c.interfaceCheckInterval = 200ms;
+    return c;
+}
+
+struct Seen {
+    DiscoveredService service;
+    bool up;
+    Clock::time_point at;
+};
+
+// An Mdns started inside a namespace, with a browse whose events go to `events`.
+struct Host {
+    std::unique_ptr<Mdns> mdns;
+    pnp::testing::Inbox<Seen> events;
+
+    Host(const Netns& ns, MdnsConfig c = config()) {
+        inNetns(ns, [&] {
+            mdns = std::make_unique<Mdns>(c);
+            mdns->start();
+        });
+    }
+    void browse(const std::string& type = kType) {
+        mdns->browse(type, [this](const DiscoveredService& s, bool up) {
+            events.put({s, up, Clock::now()});
+        });
+    }
+    // Waits until the engine has joined n interfaces.
+    bool waitInterfaces(std::size_t n) const {
+        auto end = Clock::now() + 5s;
+        while (Clock::now() < end) {
+            if (mdns->interfaceNames().size() == n) return true;
+            std::this_thread::sleep_for(10ms);
+        }
+        return false;
+    }
+    // The first event for `instance` with direction `up` (and matching pred), or nullopt.
+    template <class Pred>
+    std::optional<Seen> waitEvent(const std::string& instance, bool up, Pred pred,
+                                  std::chrono::milliseconds timeout = 5000ms) {
+        std::optional<Seen> found;
+        events.waitFor(
+            [&](const std::vector<Seen>& v) {
+                for (const auto& e : v) {
+                    if (e.service.instance == instance && e.up == up && pred(e.service)) {
+                        found = e;
+                        return true;
+                    }
+                }
+                return false;
+            },
+            timeout);
+        return found;
+    }
+    std::optional<Seen> waitEvent(const std::string& instance, bool up,
+                                  std::chrono::milliseconds timeout = 5000ms) {
+        return waitEvent(
+            instance, up, [](const DiscoveredService&) { return true; }, timeout);
+    }
+};
+
+ServiceRecord service(const std::string& instance, const std::string& host) {
+    ServiceRecord r;
+    r.instance = instance;
+    r.host = host;
+    r.port = 4840;
+    r.txt = {"path=/", "caps=LDS,DA"};
+    return r;
+}
+
+long long msSince(Clock::time_point t0, Clock::time_point t) {
+    return std::chrono::duration_cast<std::chrono::milliseconds>(t - t0).count();
+}
+
+}  // namespace
+
+TEST(Mdns, PublishUpdateWithdrawAcrossHosts) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.1.1", b, "vb", "10.77.1.2");
+    Host pub(a), browser(b);
+    ASSERT_TRUE(pub.waitInterfaces(1));
+    ASSERT_TRUE(browser.waitInterfaces(1));
+    EXPECT_EQ(browser.mdns->interfaceNames(), std::vector<std::string>{"vb"});
+    browser.browse();
+
+    auto t0 = Clock::now();
+    auto id = pub.mdns->publish(service("robot-1", "robot-1-host"));
+    auto up = browser.waitEvent("robot-1", true);
+    ASSERT_TRUE(up);
+    // Announced at once: no probe delay (a loaded CI machine gets some slack).
+    EXPECT_LT(msSince(t0, up->at), 250) << "seen after " << msSince(t0, up->at) << " ms";
+    const auto& s = up->service;
+    EXPECT_EQ(s.type, kType);
+    EXPECT_EQ(s.host, "robot-1-host.local");
+    EXPECT_EQ(s.port, 4840);
+    EXPECT_EQ(s.addresses, std::vector<std::string>{"10.77.1.1"});
+    EXPECT_EQ(s.interfaceName, "vb");
+    EXPECT_GT(s.interfaceIndex, 0);
+    EXPECT_EQ(s.txtValue("caps"), "LDS,DA");
+    EXPECT_EQ(s.txtValue("PATH"), "/");
+    EXPECT_EQ(s.txtValue("missing"), "");
+    ASSERT_EQ(browser.mdns->services(kType).size(), 1u);
+
+    pub.mdns->update(id, {"path=/", "caps=LDS"});
+    auto changed = browser.waitEvent(
+        "robot-1", true, [](const DiscoveredService& d) { return d.txtValue("caps") == "LDS"; });
+    ASSERT_TRUE(changed) << "TXT update not seen";
+
+    t0 = Clock::now();
+    pub.mdns->withdraw(id);
+    auto down = browser.waitEvent("robot-1", false, 3000ms);
+    ASSERT_TRUE(down) << "goodbye not seen";
+    EXPECT_LT(msSince(t0, down->at), 500);
+    EXPECT_TRUE(browser.mdns->services(kType).empty());
+}
+
+TEST(Mdns, BrowseAfterPublishIsAnsweredAndShutdownSaysGoodbye) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.2.1", b, "vb", "10.77.2.2");
+    Host pub(a), browser(b);
+    ASSERT_TRUE(pub.waitInterfaces(1));
+    ASSERT_TRUE(browser.waitInterfaces(1));
+    pub.mdns->publish(service("late", "late-host"));
+    std::this_thread::sleep_for(300ms);  // the first announcement went unheard
+    auto t0 = Clock::now();
+    browser.browse();
+    auto up = browser.waitEvent("late", true, 2000ms);
+    ASSERT_TRUE(up) << "query not answered";
+    EXPECT_LT(msSince(t0, up->at), 500);  // answered after 20-120 ms (shared PTR)
+
+    pub.mdns.reset();  // destructor: goodbyes, then stop
+    EXPECT_TRUE(browser.waitEvent("late", false, 2000ms)) << "no goodbye on shutdown";
+}
+
+TEST(Mdns, RecordsExpireAfterTheirTtlAndAreRefreshedBefore) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.3.1", b, "vb", "10.77.3.2");
+    Host browser(b);
+    ASSERT_TRUE(browser.waitInterfaces(1));
+    browser.browse();
+    // A foreign responder that announces once with TTL 2 s and then goes silent.
+    std::unique_ptr<UdpPeer> peer;
+    inNetns(a, [&] { peer = std::make_unique<UdpPeer>(kPort, "va", "224.0.0.251"); });
+    DnsMessage m;
+    m.flags = DnsMessage::kResponseFlag | DnsMessage::kAuthoritativeFlag;
+    ResourceRecord ptr, srv, txt, addr;
+    ptr.name = "_opcua-tcp._tcp.local";
+    ptr.type = rrtype::PTR;
+    ptr.ptr = "short._opcua-tcp._tcp.local";
+    srv.name = txt.name = ptr.ptr;
+    srv.type = rrtype::SRV;
+    srv.srv = {0, 0, 4841, "short-host.local"};
+    txt.type = rrtype::TXT;
+    txt.txt = {"path=/x"};
+    addr.name = "short-host.local";
+    addr.type = rrtype::A;
+    addr.ipv4 = {10, 77, 3, 1};
+    for (auto* r : {&ptr, &srv, &txt, &addr}) r->ttl = 2;
+    m.answers = {ptr, srv, txt, addr};
+    auto t0 = Clock::now();
+    peer->sendToGroup(encode(m), kPort);
+    auto up = browser.waitEvent("short", true, 2000ms);
+    ASSERT_TRUE(up);
+    EXPECT_EQ(up->service.port, 4841);
+    EXPECT_EQ(up->service.txtValue("path"), "/x");
+
+    // The browser asks again at 80 % of the TTL (1.6 s).
+    bool refreshed = false;
+    while (!refreshed && Clock::now() - t0 < 2500ms) {
+        auto p = peer->receive(100ms);
+        if (!p) continue;
+        try {
+            DnsMessage q = decode(p->bytes);
+            for (const auto& qu : q.questions) {
+                if (!q.isResponse() && namesEqual(qu.name, ptr.ptr)) refreshed = true;
+            }
+        } catch (const DnsError&) {
+        }
+    }
+    EXPECT_TRUE(refreshed) << "no refresh query before expiry";
+    EXPECT_GE(msSince(t0, Clock::now()), 1400);
+
+    auto down = browser.waitEvent("short", false, 4000ms);
+    ASSERT_TRUE(down) << "not expired";
+    EXPECT_GE(msSince(t0, down->at), 1900);
+    EXPECT_LT(msSince(t0, down->at), 3500);
+}
+
+TEST(Mdns, NewcomerWithTheSameInstanceNameIsRenamed) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.4.1", b, "vb", "10.77.4.2");
+    Host first(a), second(b);
+    ASSERT_TRUE(first.waitInterfaces(1));
+    ASSERT_TRUE(second.waitInterfaces(1));
+    first.browse();
+    second.browse();
+    pnp::testing::Inbox<std::string> renamedFirst, renamedSecond;
+    first.mdns->publish(service("robot", "host-a"),
+                        [&](const std::string& n) { renamedFirst.put(n); });
+    std::this_thread::sleep_for(1500ms);  // established
+    second.mdns->publish(service("robot", "host-b"),
+                         [&](const std::string& n) { renamedSecond.put(n); });
+    ASSERT_TRUE(renamedSecond.waitForCount(1, 3000ms)) << "newcomer not renamed";
+    EXPECT_EQ(renamedSecond.items().front(), "robot (2)");
+    // Each sees the other under its final name.
+    EXPECT_TRUE(first.waitEvent("robot (2)", true, 3000ms));
+    auto seen = second.waitEvent(
+        "robot", true, [](const DiscoveredService& d) { return d.host == "host-a.local"; });
+    EXPECT_TRUE(seen);
+    std::this_thread::sleep_for(500ms);
+    EXPECT_TRUE(renamedFirst.items().empty()) << "the established owner was renamed";
+}
+
+TEST(Mdns, SimultaneousConflictRenamesExactlyOne) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.5.1", b, "vb", "10.77.5.2");
+    Host ha(a), hb(b);
+    ASSERT_TRUE(ha.waitInterfaces(1));
+    ASSERT_TRUE(hb.waitInterfaces(1));
+    pnp::testing::Inbox<std::string> renames;
+    ha.mdns->publish(service("cell", "host-a"), [&](const std::string& n) { renames.put(n); });
+    hb.mdns->publish(service("cell", "host-b"), [&](const std::string& n) { renames.put(n); });
+    ASSERT_TRUE(renames.waitForCount(1, 3000ms)) << "conflict not detected";
+    std::this_thread::sleep_for(1500ms);  // no second rename follows
+    ASSERT_EQ(renames.items().size(), 1u);
+    EXPECT_EQ(renames.items().front(), "cell (2)");
+}
+
+TEST(Mdns, TwoEnginesOnOneHostSeeEachOther) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.6.1", b, "vb", "10.77.6.2");
+    Host pub(a), browser(a);  // same namespace, same port (SO_REUSEPORT), multicast loop
+    ASSERT_TRUE(pub.waitInterfaces(1));
+    ASSERT_TRUE(browser.waitInterfaces(1));
+    browser.browse();
+    pub.mdns->publish(service("local-peer", "lp-host"));
+    auto up = browser.waitEvent("local-peer", true, 2000ms);
+    ASSERT_TRUE(up);
+    EXPECT_EQ(up->service.addresses, std::vector<std::string>{"10.77.6.1"});
+}
+
+TEST(Mdns, SeveralInterfacesAndInterfaceChanges) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b, c;
+    link(a, "vab", "10.77.7.1", b, "vba", "10.77.7.2");
+    link(a, "vac", "10.77.8.1", c, "vca", "10.77.8.2");
+    Host ha(a), hb(b), hc(c);
+    ASSERT_TRUE(ha.waitInterfaces(2));
+    ASSERT_TRUE(hb.waitInterfaces(1));
+    ASSERT_TRUE(hc.waitInterfaces(1));
+    ha.browse();
+    hb.browse();
+    hc.browse();
+    ha.mdns->publish(service("multi", "multi-host"));
+    hb.mdns->publish(service("on-b", "b-host"));
+    hc.mdns->publish(service("on-c", "c-host"));
+
+    // A answers on each link with that link's own address.
+    auto atB = hb.waitEvent("multi", true);
+    auto atC = hc.waitEvent("multi", true);
+    ASSERT_TRUE(atB);
+    ASSERT_TRUE(atC);
+    EXPECT_EQ(atB->service.addresses, std::vector<std::string>{"10.77.7.1"});
+    EXPECT_EQ(atC->service.addresses, std::vector<std::string>{"10.77.8.1"});
+    auto bAtA = ha.waitEvent("on-b", true);
+    auto cAtA = ha.waitEvent("on-c", true);
+    ASSERT_TRUE(bAtA);
+    ASSERT_TRUE(cAtA);
+    EXPECT_EQ(bAtA->service.interfaceName, "vab");
+    EXPECT_EQ(cAtA->service.interfaceName, "vac");
+
+    // The link to C disappears: C's service is reported down on A at once.
+    auto t0 = Clock::now();
+    ASSERT_TRUE(sh("ip -n " + a.name() + " link del vac"));
+    auto down = ha.waitEvent("on-c", false, 3000ms);
+    ASSERT_TRUE(down);
+    EXPECT_LT(msSince(t0, down->at), 1000);
+    EXPECT_TRUE(ha.waitInterfaces(1));
+
+    // A new link to a new host D: A joins it and announces there, and its browse finds D.
+    Netns d;
+    Host hd(d);
+    hd.browse();
+    hd.mdns->publish(service("on-d", "d-host"));
+    t0 = Clock::now();
+    link(a, "vad", "10.77.9.1", d, "vda", "10.77.9.2");
+    auto atD = hd.waitEvent("multi", true, 3000ms);
+    ASSERT_TRUE(atD) << "not announced on the new interface";
+    EXPECT_EQ(atD->service.addresses, std::vector<std::string>{"10.77.9.1"});
+    EXPECT_LT(msSince(t0, atD->at), 1500);
+    auto dAtA = ha.waitEvent("on-d", true, 3000ms);
+    ASSERT_TRUE(dAtA);
+    EXPECT_EQ(dAtA->service.interfaceName, "vad");
+}
+
+TEST(Mdns, LegacyUnicastQueryGetsAUnicastAnswerAndGarbageIsIgnored) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.10.1", b, "vb", "10.77.10.2");
+    Host pub(a);
+    ASSERT_TRUE(pub.waitInterfaces(1));
+    pub.mdns->publish(service("legacy", "legacy-host"));
+    std::unique_ptr<UdpPeer> resolver;
+    inNetns(b, [&] { resolver = std::make_unique<UdpPeer>(0, "vb", "224.0.0.251"); });
+
+    // Garbage first: the engine must survive it.
+    std::mt19937 rng(7);
+    for (int i = 0; i < 200; ++i) {
+        std::vector<std::uint8_t> junk(12 + rng() % 600);
+        for (auto& x : junk) x = static_cast<std::uint8_t>(rng());
+        junk[2] = (i % 2) ? 0x84 : 0;  // half of them claim to be responses
+        resolver->sendToGroup(junk, kPort);
+        // Paced: a burst beyond the socket buffer would drop the query below as well.
+        if (i % 20 == 0) std::this_thread::sleep_for(5ms);
+    }
+    std::this_thread::sleep_for(100ms);
+
+    DnsMessage q;
+    q.id = 0x4242;
+    q.questions.push_back({"_opcua-tcp._tcp.local", rrtype::PTR, kClassIn, false});
+    resolver->sendToGroup(encode(q), kPort);
+    std::optional<DnsMessage> reply;
+    auto end = Clock::now() + 2s;
+    while (!reply && Clock::now() < end) {
+        auto p = resolver->receive(100ms);
+        if (!p) continue;
+        try {
+            DnsMessage m = decode(p->bytes);
+            if (m.isResponse() && m.id == 0x4242) reply = m;
+        } catch (const DnsError& e) {
+            ADD_FAILURE() << "undecodable reply: " << e.what();
+        }
+    }
+    ASSERT_TRUE(reply) << "no unicast reply to the legacy query";
+    ASSERT_EQ(reply->questions.size(), 1u);
+    EXPECT_EQ(reply->questions[0].name, "_opcua-tcp._tcp.local");
+    ASSERT_FALSE(reply->answers.empty());
+    EXPECT_EQ(reply->answers[0].ptr, "legacy._opcua-tcp._tcp.local");
+    for (const auto* s : {&reply->answers, &reply->additionals}) {
+        for (const auto& rr : *s) {
+            EXPECT_LE(rr.ttl, 10u);
+            EXPECT_FALSE(rr.cacheFlush);
+        }
+    }
+}
+
+TEST(Mdns, KnownAnswerSuppressesTheReply) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.11.1", b, "vb", "10.77.11.2");
+    Host pub(a);
+    ASSERT_TRUE(pub.waitInterfaces(1));
+    pub.mdns->publish(service("known", "known-host"));
+    std::unique_ptr<UdpPeer> querier;
+    inNetns(b, [&] { querier = std::make_unique<UdpPeer>(kPort, "vb", "224.0.0.251"); });
+    std::this_thread::sleep_for(3500ms);  // let the announcements pass
+    while (querier->receive(10ms)) {
+    }
+    DnsMessage q;
+    q.questions.push_back({"_opcua-tcp._tcp.local", rrtype::PTR, kClassIn, false});
+    ResourceRecord known;
+    known.name = "_opcua-tcp._tcp.local";
+    known.type = rrtype::PTR;
+    known.ttl = 100;
+    known.ptr = "known._opcua-tcp._tcp.local";
+    q.answers.push_back(known);
+    querier->sendToGroup(encode(q), kPort);
+    auto answered = [&] {
+        auto end = Clock::now() + 500ms;
+        while (Clock::now() < end) {
+            auto p = querier->receive(50ms);
+            if (!p) continue;
+            try {
+                if (decode(p->bytes).isResponse()) return true;
+            } catch (const DnsError&) {
+            }
+        }
+        return false;
+    };
+    EXPECT_FALSE(answered()) << "answered although the querier knew the answer";
+    q.answers[0].ttl = 10;  // less than half our TTL: must be answered
+    querier->sendToGroup(encode(q), kPort);
+    EXPECT_TRUE(answered());
+}
