@@ -117,7 +117,9 @@ class Writer {
         if (wire > kMaxNameLength) throw DnsError("name longer than 255 bytes");
         for (std::size_t i = 0; i < labels.size(); ++i) {
             if (compress) {
-                std::string key = lowerName(joinLabels(labels, i));
+                // Exact match only: a pointer to a differently cased suffix would change
+                // the case the receiver shows (instance names are for humans).
+                std::string key = joinLabels(labels, i);
                 auto it = suffixes_.find(key);
                 if (it != suffixes_.end()) {
                     u16(static_cast<std::uint16_t>(0xC000 | it->second));
