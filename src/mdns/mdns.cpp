@@ -41,6 +41,8 @@ constexpr std::size_t kMaxCacheRecords = 4096;  // oldest dropped beyond this
 constexpr std::size_t kMaxPacketsPerWake = 64;  // bounded receive loop
 constexpr std::size_t kMaxSentHashes = 256;
 constexpr std::size_t kMaxRecentProbes = 256;
+// Delayed responses waiting for their 20-120 ms: a query flood must not queue without end.
+constexpr std::size_t kMaxOutgoing = 512;
 constexpr std::uint32_t kLegacyTtl = 10;  // RFC 6762 §6.7
 constexpr int kProbeCount = 3;
 constexpr milliseconds kProbeInterval{250};
@@ -172,7 +174,12 @@ struct Mdns::Impl {
     TimePoint nextIfaceCheck{};
     TimePoint nextWake{};
     std::mt19937 rng;
-    std::vector<std::function<void()>> callbacks;  // run after the lock is released
+    // Callbacks run after the lock is released, each only while its owner (browse or
+    // publication id) still exists; stopBrowse()/withdraw() wait for a running batch.
+    std::vector<std::pair<std::uint64_t, std::function<void()>>> callbacks;
+    bool delivering = false;
+    std::condition_variable delivered;
+    std::thread::id threadId;
 
     // ---- records -------------------------------------------------------------------
     std::uint32_t ttlFor(std::uint16_t type) const {
@@ -303,7 +310,7 @@ struct Mdns::Impl {
         for (auto& p : ps) {
             if (at <= Clock::now()) {
                 sendRaw(ifIndex, dest, p);
-            } else {
+            } else if (outgoing.size() < kMaxOutgoing) {
                 outgoing.push_back({at, ifIndex, dest, std::move(p)});
             }
         }
@@ -605,7 +612,9 @@ struct Mdns::Impl {
         p.nextProbe = Clock::now();
         p.announcements.clear();
         scheduleAnnouncements(p, 0);
-        if (p.onRename) callbacks.push_back([f = p.onRename, n = p.rec.instance] { f(n); });
+        if (p.onRename) {
+            callbacks.emplace_back(p.id, [f = p.onRename, n = p.rec.instance] { f(n); });
+        }
     }
 
     // ---- cache ---------------------------------------------------------------------
@@ -659,13 +668,34 @@ struct Mdns::Impl {
         cache.push_back(std::move(e));
     }
 
-    // The newest live entry for (interface, name, type), or null.
-    const CacheEntry* newest(int ifIndex, const std::string& name, std::uint16_t type) const {
-        const CacheEntry* best = nullptr;
+    // Live SRV / TXT / A entries by (interface, lower-cased name, type): resolve() stays
+    // O(n log n) with a full cache.
+    using Index =
+        std::map<std::tuple<int, std::string, std::uint16_t>, std::vector<const CacheEntry*>>;
+    Index liveIndex() const {
+        Index idx;
         for (const auto& e : cache) {
-            if (e.ifIndex != ifIndex || e.rr.type != type || e.goodbye || e.flushed) continue;
-            if (!namesEqual(e.rr.name, name)) continue;
-            if (best == nullptr || e.received > best->received) best = &e;
+            if (e.goodbye || e.flushed) continue;
+            if (e.rr.type != rrtype::SRV && e.rr.type != rrtype::TXT && e.rr.type != rrtype::A) {
+                continue;
+            }
+            idx[{e.ifIndex, lowerName(e.rr.name), e.rr.type}].push_back(&e);
+        }
+        return idx;
+    }
+
+    static std::vector<const CacheEntry*> lookup(const Index& idx, int ifIndex,
+                                                 const std::string& name, std::uint16_t type) {
+        auto it = idx.find({ifIndex, lowerName(name), type});
+        return it == idx.end() ? std::vector<const CacheEntry*>{} : it->second;
+    }
+
+    // The newest live entry for (interface, name, type), or null.
+    static const CacheEntry* newest(const Index& idx, int ifIndex, const std::string& name,
+                                    std::uint16_t type) {
+        const CacheEntry* best = nullptr;
+        for (const auto* e : lookup(idx, ifIndex, name, type)) {
+            if (best == nullptr || e->received > best->received) best = e;
         }
         return best;
     }
@@ -681,6 +711,7 @@ struct Mdns::Impl {
         const std::string& type, const std::string& typeName,
         std::vector<std::pair<int, Question>>* missing = nullptr) const {
         std::map<std::string, DiscoveredService> out;
+        const Index idx = liveIndex();
         for (const auto& e : cache) {
             if (e.rr.type != rrtype::PTR || e.goodbye || !namesEqual(e.rr.name, typeName)) {
                 continue;
@@ -693,18 +724,15 @@ struct Mdns::Impl {
             }
             if (labels.size() < 2) continue;
             const std::string& inst = e.rr.ptr;
-            const CacheEntry* srv = newest(e.ifIndex, inst, rrtype::SRV);
-            const CacheEntry* txt = newest(e.ifIndex, inst, rrtype::TXT);
+            const CacheEntry* srv = newest(idx, e.ifIndex, inst, rrtype::SRV);
+            const CacheEntry* txt = newest(idx, e.ifIndex, inst, rrtype::TXT);
             if (missing && (!srv || !txt)) {
                 missing->push_back({e.ifIndex, Question{inst, rrtype::ANY, kClassIn, false}});
             }
             if (!srv || !txt) continue;
             DiscoveredService s;
-            for (const auto& a : cache) {
-                if (a.ifIndex == e.ifIndex && a.rr.type == rrtype::A && !a.goodbye && !a.flushed &&
-                    namesEqual(a.rr.name, srv->rr.srv.target)) {
-                    s.addresses.push_back(ipv4Text(a.rr.ipv4));
-                }
+            for (const auto* a : lookup(idx, e.ifIndex, srv->rr.srv.target, rrtype::A)) {
+                s.addresses.push_back(ipv4Text(a->rr.ipv4));
             }
             if (s.addresses.empty()) {
                 if (missing) {
@@ -897,12 +925,14 @@ struct Mdns::Impl {
         for (auto& [id, b] : browses) {
             auto now = resolve(b.type, b.typeName);
             for (const auto& [key, s] : b.reported) {
-                if (!now.count(key)) callbacks.push_back([f = b.callback, s] { f(s, false); });
+                if (!now.count(key)) {
+                    callbacks.emplace_back(b.id, [f = b.callback, s] { f(s, false); });
+                }
             }
             for (const auto& [key, s] : now) {
                 auto it = b.reported.find(key);
                 if (it == b.reported.end() || !sameService(it->second, s)) {
-                    callbacks.push_back([f = b.callback, s] { f(s, true); });
+                    callbacks.emplace_back(b.id, [f = b.callback, s] { f(s, true); });
                 }
             }
             b.reported = std::move(now);
@@ -912,15 +942,13 @@ struct Mdns::Impl {
     // ---- thread --------------------------------------------------------------------
     void run() {
         std::unique_lock lock(mu);
+        threadId = std::this_thread::get_id();
         while (!stopping) {
             tick();
-            auto cbs = std::move(callbacks);
-            callbacks.clear();
+            deliver(lock);
             auto wait = std::max<milliseconds>(
                 milliseconds(0), std::chrono::ceil<milliseconds>(nextWake - Clock::now()));
             lock.unlock();
-            for (auto& f : cbs) f();
-            cbs.clear();
             pollfd fds[3] = {{sock, POLLIN, 0}, {wake, POLLIN, 0}, {netlink, POLLIN, 0}};
             int r = ::poll(fds, netlink >= 0 ? 3 : 2, static_cast<int>(wait.count()));
             lock.lock();
@@ -938,10 +966,30 @@ struct Mdns::Impl {
         for (const auto& [id, p] : pubs) goodbye(p, true);
         // Delayed responses are dropped; queued goodbyes (withdraw just before stop) go out.
         tickOutgoing(Clock::time_point::max());
+        deliver(lock);
+    }
+
+    // Runs the queued callbacks without the lock (held on entry and on return).
+    void deliver(std::unique_lock<std::mutex>& lock) {
+        if (callbacks.empty()) return;
         auto cbs = std::move(callbacks);
         callbacks.clear();
-        lock.unlock();
-        for (auto& f : cbs) f();
+        delivering = true;
+        for (auto& [owner, f] : cbs) {
+            if (!pubs.count(owner) && !browses.count(owner)) continue;
+            lock.unlock();
+            f();
+            lock.lock();
+        }
+        delivering = false;
+        delivered.notify_all();
+    }
+
+    // After a browse or publication is removed: no callback of it runs after this returns
+    // (unless called from a callback, which cannot wait for itself).
+    void waitForDelivery(std::unique_lock<std::mutex>& lock) {
+        if (std::this_thread::get_id() == threadId) return;
+        delivered.wait(lock, [this] { return !delivering; });
     }
 
     void openSockets() {
@@ -1089,19 +1137,15 @@ void Mdns::update(PublicationId id, std::vector<std::string> txt) {
 }
 
 void Mdns::withdraw(PublicationId id) {
-    std::lock_guard lock(impl_->mu);
+    std::unique_lock lock(impl_->mu);
     auto it = impl_->pubs.find(id);
     if (it == impl_->pubs.end()) return;
-    // Queued, not sent here: all socket I/O happens on the thread (or in stop()).
-    auto now = Clock::now();
-    for (const auto& i : impl_->ifaces) {
-        auto rs = impl_->allRecords(it->second, i);
-        for (auto& rr : rs) rr.ttl = 0;
-        impl_->send(i.index, impl_->groupAddr(), Impl::response(std::move(rs)),
-                    now + milliseconds(1));
-    }
+    // Sent from this thread: sends are non-blocking and made under the lock, like the
+    // engine thread's.
+    impl_->goodbye(it->second, true);
     impl_->pubs.erase(it);
     impl_->wakeUp();
+    impl_->waitForDelivery(lock);
 }
 
 Mdns::BrowseId Mdns::browse(std::string type,
@@ -1120,8 +1164,9 @@ Mdns::BrowseId Mdns::browse(std::string type,
 }
 
 void Mdns::stopBrowse(BrowseId id) {
-    std::lock_guard lock(impl_->mu);
+    std::unique_lock lock(impl_->mu);
     impl_->browses.erase(id);
+    impl_->waitForDelivery(lock);
 }
 
 std::vector<DiscoveredService> Mdns::services(const std::string& type) const {

@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <chrono>
 #include <memory>
 #include <random>
@@ -48,8 +50,8 @@ struct Seen {
 
 // An Mdns started inside a namespace, with a browse whose events go to `events`.
 struct Host {
+    pnp::testing::Inbox<Seen> events;  // declared first: outlives the engine that feeds it
     std::unique_ptr<Mdns> mdns;
-    pnp::testing::Inbox<Seen> events;
 
     Host(const Netns& ns, MdnsConfig c = config()) {
         inNetns(ns, [&] {
@@ -230,12 +232,12 @@ TEST(Mdns, NewcomerWithTheSameInstanceNameIsRenamed) {
     SKIP_WITHOUT_NETNS();
     Netns a, b;
     link(a, "va", "10.77.4.1", b, "vb", "10.77.4.2");
+    pnp::testing::Inbox<std::string> renamedFirst, renamedSecond;  // outlive the engines
     Host first(a), second(b);
     ASSERT_TRUE(first.waitInterfaces(1));
     ASSERT_TRUE(second.waitInterfaces(1));
     first.browse();
     second.browse();
-    pnp::testing::Inbox<std::string> renamedFirst, renamedSecond;
     first.mdns->publish(service("robot", "host-a"),
                         [&](const std::string& n) { renamedFirst.put(n); });
     std::this_thread::sleep_for(1500ms);  // established
@@ -256,10 +258,10 @@ TEST(Mdns, SimultaneousConflictRenamesExactlyOne) {
     SKIP_WITHOUT_NETNS();
     Netns a, b;
     link(a, "va", "10.77.5.1", b, "vb", "10.77.5.2");
+    pnp::testing::Inbox<std::string> renames;  // outlives the engines
     Host ha(a), hb(b);
     ASSERT_TRUE(ha.waitInterfaces(1));
     ASSERT_TRUE(hb.waitInterfaces(1));
-    pnp::testing::Inbox<std::string> renames;
     ha.mdns->publish(service("cell", "host-a"), [&](const std::string& n) { renames.put(n); });
     hb.mdns->publish(service("cell", "host-b"), [&](const std::string& n) { renames.put(n); });
     ASSERT_TRUE(renames.waitForCount(1, 3000ms)) << "conflict not detected";
@@ -424,4 +426,78 @@ TEST(Mdns, KnownAnswerSuppressesTheReply) {
     q.answers[0].ttl = 10;  // less than half our TTL: must be answered
     querier->sendToGroup(encode(q), kPort);
     EXPECT_TRUE(answered());
+}
+
+namespace {
+
+// A foreign host's announcement of one resolved service.
+std::vector<std::uint8_t> announcement(const std::string& instance, std::uint32_t ttl,
+                                       std::array<std::uint8_t, 4> address) {
+    DnsMessage m;
+    m.flags = DnsMessage::kResponseFlag | DnsMessage::kAuthoritativeFlag;
+    ResourceRecord ptr, srv, txt, a;
+    ptr.name = "_opcua-tcp._tcp.local";
+    ptr.type = rrtype::PTR;
+    ptr.ptr = instance + "._opcua-tcp._tcp.local";
+    srv.name = txt.name = ptr.ptr;
+    srv.type = rrtype::SRV;
+    srv.srv = {0, 0, 4840, instance + "-host.local"};
+    txt.type = rrtype::TXT;
+    txt.txt = {"path=/"};
+    a.name = srv.srv.target;
+    a.type = rrtype::A;
+    a.ipv4 = address;
+    for (auto* r : {&ptr, &srv, &txt, &a}) r->ttl = ttl;
+    m.answers = {ptr, srv, txt, a};
+    return encode(m);
+}
+
+}  // namespace
+
+TEST(Mdns, CacheStaysBoundedUnderAFlood) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.12.1", b, "vb", "10.77.12.2");
+    Host browser(b);
+    ASSERT_TRUE(browser.waitInterfaces(1));
+    browser.browse();
+    std::unique_ptr<UdpPeer> peer;
+    inNetns(a, [&] { peer = std::make_unique<UdpPeer>(kPort, "va", "224.0.0.251"); });
+    // 1500 services = 6000 records, beyond the 4096-record cache.
+    for (int i = 0; i < 1500; ++i) {
+        peer->sendToGroup(announcement("flood-" + std::to_string(i), 120, {10, 77, 12, 1}), kPort);
+        if (i % 10 == 0) std::this_thread::sleep_for(1ms);
+    }
+    std::this_thread::sleep_for(500ms);
+    auto n = browser.mdns->services(kType).size();
+    EXPECT_LE(n, 4096u / 4);
+    // Most of the newest services stay resolved (some packets of the burst may be dropped
+    // by the socket buffer, more so under the sanitizers).
+    EXPECT_GT(n, 100u);
+    // Still working: a new service is seen at once.
+    peer->sendToGroup(announcement("after-flood", 120, {10, 77, 12, 1}), kPort);
+    EXPECT_TRUE(browser.waitEvent("after-flood", true, 2000ms));
+}
+
+TEST(Mdns, NoCallbackAfterStopBrowseReturns) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.13.1", b, "vb", "10.77.13.2");
+    std::atomic<int> calls{0};  // outlives the engines
+    Host pub(a), browser(b);
+    ASSERT_TRUE(pub.waitInterfaces(1));
+    ASSERT_TRUE(browser.waitInterfaces(1));
+    auto id = browser.mdns->browse(kType, [&](const DiscoveredService&, bool) {
+        ++calls;
+        std::this_thread::sleep_for(50ms);  // a slow consumer
+    });
+    for (int i = 0; i < 5; ++i) pub.mdns->publish(service("cb-" + std::to_string(i), "cb-host"));
+    auto end = Clock::now() + 3s;
+    while (calls == 0 && Clock::now() < end) std::this_thread::sleep_for(5ms);
+    ASSERT_GT(calls.load(), 0);
+    browser.mdns->stopBrowse(id);  // while the others are being delivered
+    int after = calls.load();
+    pub.mdns->publish(service("cb-late", "cb-host"));
+    std::this_thread::sleep_for(500ms);
+    EXPECT_EQ(calls.load(), after);
 }
