@@ -107,6 +107,22 @@ ServiceRecord service(const std::string& instance, const std::string& host) {
     return r;
 }
 
+// The unicast reply with `id` that `peer` receives within 2 s.
+std::optional<DnsMessage> replyTo(const UdpPeer& peer, std::uint16_t id) {
+    auto end = Clock::now() + 2s;
+    while (Clock::now() < end) {
+        auto p = peer.receive(100ms);
+        if (!p) continue;
+        try {
+            DnsMessage m = decode(p->bytes);
+            if (m.isResponse() && m.id == id) return m;
+        } catch (const DnsError& e) {
+            ADD_FAILURE() << "undecodable reply: " << e.what();
+        }
+    }
+    return std::nullopt;
+}
+
 long long msSince(Clock::time_point t0, Clock::time_point t) {
     return std::chrono::duration_cast<std::chrono::milliseconds>(t - t0).count();
 }
@@ -364,18 +380,7 @@ TEST(Mdns, LegacyUnicastQueryGetsAUnicastAnswerAndGarbageIsIgnored) {
     q.id = 0x4242;
     q.questions.push_back({"_opcua-tcp._tcp.local", rrtype::PTR, kClassIn, false});
     resolver->sendToGroup(encode(q), kPort);
-    std::optional<DnsMessage> reply;
-    auto end = Clock::now() + 2s;
-    while (!reply && Clock::now() < end) {
-        auto p = resolver->receive(100ms);
-        if (!p) continue;
-        try {
-            DnsMessage m = decode(p->bytes);
-            if (m.isResponse() && m.id == 0x4242) reply = m;
-        } catch (const DnsError& e) {
-            ADD_FAILURE() << "undecodable reply: " << e.what();
-        }
-    }
+    auto reply = replyTo(*resolver, 0x4242);
     ASSERT_TRUE(reply) << "no unicast reply to the legacy query";
     ASSERT_EQ(reply->questions.size(), 1u);
     EXPECT_EQ(reply->questions[0].name, "_opcua-tcp._tcp.local");
@@ -387,6 +392,94 @@ TEST(Mdns, LegacyUnicastQueryGetsAUnicastAnswerAndGarbageIsIgnored) {
             EXPECT_FALSE(rr.cacheFlush);
         }
     }
+
+    // Service type enumeration (RFC 6763 §9).
+    q.id = 0x4343;
+    q.questions = {{"_services._dns-sd._udp.local", rrtype::PTR, kClassIn, false}};
+    resolver->sendToGroup(encode(q), kPort);
+    auto types = replyTo(*resolver, 0x4343);
+    ASSERT_TRUE(types) << "no reply to the service type enumeration";
+    ASSERT_EQ(types->answers.size(), 1u);
+    EXPECT_EQ(types->answers[0].ptr, "_opcua-tcp._tcp.local");
+}
+
+TEST(Mdns, QuQuestionIsAnsweredByUnicast) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.14.1", b, "vb", "10.77.14.2");
+    Host pub(a);
+    ASSERT_TRUE(pub.waitInterfaces(1));
+    pub.mdns->publish(service("qu", "qu-host"));
+    // Port 15353 like a full mDNS querier, but not in the group: only unicast reaches it.
+    std::unique_ptr<UdpPeer> querier;
+    inNetns(b, [&] { querier = std::make_unique<UdpPeer>(kPort, "vb", "224.0.0.251", false); });
+    DnsMessage q;
+    q.id = 0x5151;  // mDNS responders answer QU with ID 0 (not legacy): matched below
+    q.questions.push_back({"qu._opcua-tcp._tcp.local", rrtype::SRV, kClassIn, true});
+    querier->sendToGroup(encode(q), kPort);
+    std::optional<DnsMessage> reply;
+    auto end = Clock::now() + 2s;
+    while (!reply && Clock::now() < end) {
+        auto p = querier->receive(100ms);
+        if (!p) continue;
+        try {
+            DnsMessage m = decode(p->bytes);
+            if (m.isResponse() && !m.answers.empty() && m.answers[0].type == rrtype::SRV) {
+                reply = m;
+            }
+        } catch (const DnsError&) {
+        }
+    }
+    ASSERT_TRUE(reply) << "no unicast reply to the QU question";
+    EXPECT_EQ(reply->answers[0].srv.target, "qu-host.local");
+    EXPECT_TRUE(reply->answers[0].cacheFlush);
+    ASSERT_FALSE(reply->additionals.empty());  // the A record of the target
+    EXPECT_EQ(reply->additionals[0].type, rrtype::A);
+}
+
+TEST(Mdns, LargeAnswersAreSplitIntoPackets) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.15.1", b, "vb", "10.77.15.2");
+    Host pub(a), browser(b);
+    ASSERT_TRUE(pub.waitInterfaces(1));
+    ASSERT_TRUE(browser.waitInterfaces(1));
+    // 30 PTRs of ~75 bytes each (long instance labels): more than one 1440-byte packet.
+    constexpr int kCount = 30;
+    for (int i = 0; i < kCount; ++i) {
+        auto r = service("big-" + std::to_string(i) + "-" + std::string(48, 'x'), "big-host");
+        r.txt.push_back("pad=" + std::string(200, 'x'));
+        pub.mdns->publish(r);
+    }
+    browser.browse();
+    EXPECT_TRUE(browser.events.waitFor(
+        [](const std::vector<Seen>& v) {
+            return std::count_if(v.begin(), v.end(), [](const Seen& e) { return e.up; }) >= kCount;
+        },
+        5000ms));
+    EXPECT_EQ(browser.mdns->services(kType).size(), static_cast<std::size_t>(kCount));
+
+    // A query without known answers: all 30 PTRs come back, split into packets of at most
+    // 1440 bytes of payload.
+    std::unique_ptr<UdpPeer> querier;
+    inNetns(b, [&] { querier = std::make_unique<UdpPeer>(kPort, "vb", "224.0.0.251"); });
+    std::this_thread::sleep_for(3500ms);  // the announcements are over
+    while (querier->receive(10ms)) {
+    }
+    DnsMessage q;
+    q.questions.push_back({"_opcua-tcp._tcp.local", rrtype::PTR, kClassIn, false});
+    querier->sendToGroup(encode(q), kPort);
+    std::size_t largest = 0, packets = 0, ptrs = 0;
+    while (auto p = querier->receive(300ms)) {
+        DnsMessage m = decode(p->bytes);
+        if (!m.isResponse()) continue;
+        largest = std::max(largest, p->bytes.size());
+        ++packets;
+        for (const auto& rr : m.answers) ptrs += rr.type == rrtype::PTR;
+    }
+    EXPECT_EQ(ptrs, static_cast<std::size_t>(kCount));
+    EXPECT_GT(packets, 1u);
+    EXPECT_LE(largest, 1440u);
 }
 
 TEST(Mdns, KnownAnswerSuppressesTheReply) {

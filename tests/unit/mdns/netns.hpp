@@ -92,8 +92,10 @@ void inNetns(const Netns& ns, F&& f) {
 // inside inNetns().
 class UdpPeer {
   public:
-    // port 0: ephemeral. ifName non-empty: join group on it and send multicast through it.
-    UdpPeer(std::uint16_t port, const std::string& ifName, const std::string& group) {
+    // port 0: ephemeral. ifName non-empty: send multicast through it and (join) join the
+    // group on it; a peer that has not joined receives unicast only.
+    UdpPeer(std::uint16_t port, const std::string& ifName, const std::string& group,
+            bool join = true) {
         fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
         if (fd_ < 0) throw std::runtime_error("socket");
         int one = 1;
@@ -110,7 +112,7 @@ class UdpPeer {
             ip_mreqn m{};
             m.imr_multiaddr = group_;
             m.imr_ifindex = static_cast<int>(::if_nametoindex(ifName.c_str()));
-            ::setsockopt(fd_, IPPROTO_IP, IP_ADD_MEMBERSHIP, &m, sizeof m);
+            if (join) ::setsockopt(fd_, IPPROTO_IP, IP_ADD_MEMBERSHIP, &m, sizeof m);
             ::setsockopt(fd_, IPPROTO_IP, IP_MULTICAST_IF, &m, sizeof m);
         }
     }
