@@ -15,10 +15,14 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <exception>
+#include <filesystem>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -31,10 +35,28 @@ inline bool sh(const std::string& cmd) {
     return std::system(("timeout 10 " + cmd + " >/dev/null 2>&1").c_str()) == 0;
 }
 
+constexpr const char* kNetnsPrefix = "pnpmdns-";
+
+// Namespaces of earlier runs that crashed (no destructor ran): "pnpmdns-<pid>-<n>" whose
+// process no longer exists. Once per process.
+inline void removeStaleNamespaces() {
+    static bool done = false;
+    if (done) return;
+    done = true;
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator("/var/run/netns", ec)) {
+        std::string name = e.path().filename().string();
+        if (!name.starts_with(kNetnsPrefix)) continue;
+        pid_t pid = static_cast<pid_t>(std::atol(name.c_str() + std::strlen(kNetnsPrefix)));
+        if (pid > 0 && ::kill(pid, 0) != 0 && errno == ESRCH) sh("ip netns del " + name);
+    }
+}
+
 // "" when namespaces can be used, else why not.
 inline std::string skipReason() {
     if (::geteuid() != 0) return "needs root to create network namespaces (ip netns)";
     if (!sh("ip -V")) return "the ip command (iproute2) is missing";
+    removeStaleNamespaces();
     return "";
 }
 
@@ -42,7 +64,7 @@ class Netns {
   public:
     Netns() {
         static std::atomic<int> counter{0};
-        name_ = "pnpmdns-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
+        name_ = kNetnsPrefix + std::to_string(::getpid()) + "-" + std::to_string(counter++);
         if (!sh("ip netns add " + name_)) throw std::runtime_error("ip netns add " + name_);
         sh("ip -n " + name_ + " link set lo up");
     }
