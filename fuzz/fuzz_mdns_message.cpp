@@ -24,30 +24,19 @@ using pnp::fuzz::check;
 
 namespace {
 
-ResourceRecord rr(std::string name, std::uint16_t type, std::uint32_t ttl, bool flush) {
-    ResourceRecord r;
-    r.name = std::move(name);
-    r.type = type;
-    r.ttl = ttl;
-    r.cacheFlush = flush;
-    return r;
-}
-
 void makeSeeds(pnp::fuzz::SeedWriter& w) {
     const std::string type = "_opcua-tcp._tcp.local";
     const std::string inst = "robot-1." + type;
-    auto ptr = rr(type, rrtype::PTR, 120, false);
-    ptr.ptr = inst;
-    auto srv = rr(inst, rrtype::SRV, 120, true);
-    srv.srv = {0, 0, 4840, "robot-1-host.local"};
-    auto txt = rr(inst, rrtype::TXT, 120, true);
-    txt.txt = {"path=/", "caps=LDS,DA"};
-    auto a = rr("robot-1-host.local", rrtype::A, 120, true);
-    a.ipv4 = {10, 0, 0, 1};
-    auto aaaa = rr("robot-1-host.local", rrtype::AAAA, 120, true);
+    auto ptr = ptrRecord(type, inst, 120);
+    auto srv = srvRecord(inst, {0, 0, 4840, "robot-1-host.local"}, 120, true);
+    auto txt = txtRecord(inst, {"path=/", "caps=LDS,DA"}, 120, true);
+    auto a = aRecord("robot-1-host.local", {10, 0, 0, 1}, 120, true);
+    ResourceRecord aaaa = a;
+    aaaa.type = rrtype::AAAA;
     aaaa.ipv6[0] = 0xfe;
     aaaa.ipv6[1] = 0x80;
-    auto nsec = rr("robot-1-host.local", rrtype::NSEC, 120, true);
+    ResourceRecord nsec = a;
+    nsec.type = rrtype::NSEC;
     nsec.raw = {0xC0, 0x0C, 0x00, 0x01, 0x40};
 
     DnsMessage announce;

@@ -182,13 +182,36 @@ class Writer {
     std::map<std::string, std::size_t> suffixes_;
 };
 
-ResourceRecord readRecord(Reader& r) {
-    ResourceRecord rr;
-    rr.name = r.name();
-    rr.type = r.u16();
+// Name, type and class with its top bit (cache-flush in records, QU in questions).
+struct Head {
+    std::string name;
+    std::uint16_t type;
+    std::uint16_t cls;
+    bool topBit;
+};
+Head readHead(Reader& r) {
+    Head h;
+    h.name = r.name();
+    h.type = r.u16();
     std::uint16_t cls = r.u16();
-    rr.rrclass = cls & 0x7FFF;
-    rr.cacheFlush = (cls & 0x8000) != 0;
+    h.cls = cls & 0x7FFF;
+    h.topBit = (cls & 0x8000) != 0;
+    return h;
+}
+
+ResourceRecord record(std::string name, std::uint16_t type, std::uint32_t ttl, bool flush) {
+    ResourceRecord rr;
+    rr.name = std::move(name);
+    rr.type = type;
+    rr.ttl = ttl;
+    rr.cacheFlush = flush;
+    return rr;
+}
+
+ResourceRecord readRecord(Reader& r) {
+    Head h = readHead(r);
+    ResourceRecord rr = record(std::move(h.name), h.type, 0, h.topBit);
+    rr.rrclass = h.cls;
     rr.ttl = r.u32();
     std::size_t len = r.u16();
     r.need(len);
@@ -243,13 +266,8 @@ DnsMessage decode(std::span<const std::uint8_t> bytes) {
     if (qd * 5 + (an + ns + ar) * 11 > r.left()) throw DnsError("counts exceed the message");
     m.questions.reserve(qd);
     for (std::size_t i = 0; i < qd; ++i) {
-        Question q;
-        q.name = r.name();
-        q.type = r.u16();
-        std::uint16_t cls = r.u16();
-        q.qclass = cls & 0x7FFF;
-        q.unicastResponse = (cls & 0x8000) != 0;
-        m.questions.push_back(std::move(q));
+        Head h = readHead(r);
+        m.questions.push_back({std::move(h.name), h.type, h.cls, h.topBit});
     }
     auto section = [&r](std::vector<ResourceRecord>& v, std::size_t n) {
         v.reserve(n);
@@ -292,6 +310,32 @@ std::vector<std::uint8_t> canonicalRdata(const ResourceRecord& rr) {
 
 bool sameRdata(const ResourceRecord& a, const ResourceRecord& b) {
     return a.type == b.type && canonicalRdata(a) == canonicalRdata(b);
+}
+
+ResourceRecord ptrRecord(std::string name, std::string target, std::uint32_t ttl) {
+    auto rr = record(std::move(name), rrtype::PTR, ttl, false);  // PTRs are shared
+    rr.ptr = std::move(target);
+    return rr;
+}
+
+ResourceRecord srvRecord(std::string name, SrvData srv, std::uint32_t ttl, bool cacheFlush) {
+    auto rr = record(std::move(name), rrtype::SRV, ttl, cacheFlush);
+    rr.srv = std::move(srv);
+    return rr;
+}
+
+ResourceRecord txtRecord(std::string name, std::vector<std::string> txt, std::uint32_t ttl,
+                         bool cacheFlush) {
+    auto rr = record(std::move(name), rrtype::TXT, ttl, cacheFlush);
+    rr.txt = std::move(txt);
+    return rr;
+}
+
+ResourceRecord aRecord(std::string name, std::array<std::uint8_t, 4> address, std::uint32_t ttl,
+                       bool cacheFlush) {
+    auto rr = record(std::move(name), rrtype::A, ttl, cacheFlush);
+    rr.ipv4 = address;
+    return rr;
 }
 
 bool namesEqual(std::string_view a, std::string_view b) {

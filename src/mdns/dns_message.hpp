@@ -65,6 +65,14 @@ struct ResourceRecord {
     std::vector<std::uint8_t> raw;
 };
 
+// Record builders (class IN).
+ResourceRecord ptrRecord(std::string name, std::string target, std::uint32_t ttl);
+ResourceRecord srvRecord(std::string name, SrvData srv, std::uint32_t ttl, bool cacheFlush);
+ResourceRecord txtRecord(std::string name, std::vector<std::string> txt, std::uint32_t ttl,
+                         bool cacheFlush);
+ResourceRecord aRecord(std::string name, std::array<std::uint8_t, 4> address, std::uint32_t ttl,
+                       bool cacheFlush);
+
 struct DnsMessage {
     std::uint16_t id = 0;
     std::uint16_t flags = 0;

@@ -182,40 +182,21 @@ struct Mdns::Impl {
     std::thread::id threadId;
 
     // ---- records -------------------------------------------------------------------
-    std::uint32_t ttlFor(std::uint16_t type) const {
-        return type == rrtype::A ? cfg.hostTtl : cfg.otherTtl;
-    }
-
-    ResourceRecord record(std::string name, std::uint16_t type, bool unique) const {
-        ResourceRecord rr;
-        rr.name = std::move(name);
-        rr.type = type;
-        rr.cacheFlush = unique;
-        rr.ttl = ttlFor(type);
-        return rr;
-    }
+    // PTR is shared, SRV / TXT / A are unique to us (cache-flush bit set).
     ResourceRecord ptrRecord(const Publication& p) const {
-        auto rr = record(p.typeName(), rrtype::PTR, false);
-        rr.ptr = p.instanceName();
-        return rr;
+        return mdns::ptrRecord(p.typeName(), p.instanceName(), cfg.otherTtl);
     }
     ResourceRecord srvRecord(const Publication& p) const {
-        auto rr = record(p.instanceName(), rrtype::SRV, true);
-        rr.srv.port = p.rec.port;
-        rr.srv.target = p.hostName();
-        return rr;
+        return mdns::srvRecord(p.instanceName(), {0, 0, p.rec.port, p.hostName()}, cfg.otherTtl,
+                               true);
     }
     ResourceRecord txtRecord(const Publication& p) const {
-        auto rr = record(p.instanceName(), rrtype::TXT, true);
-        rr.txt = p.rec.txt;
-        return rr;
+        return mdns::txtRecord(p.instanceName(), p.rec.txt, cfg.otherTtl, true);
     }
     ResourceRecord aRecord(const Publication& p, const Interface& i) const {
-        auto rr = record(p.hostName(), rrtype::A, true);
         in_addr a = i.addr;
         if (p.rec.address) ::inet_pton(AF_INET, p.rec.address->c_str(), &a);
-        rr.ipv4 = ipv4Bytes(a);
-        return rr;
+        return mdns::aRecord(p.hostName(), ipv4Bytes(a), cfg.hostTtl, true);
     }
     std::vector<ResourceRecord> allRecords(const Publication& p, const Interface& i) const {
         return {ptrRecord(p), srvRecord(p), txtRecord(p), aRecord(p, i)};
@@ -503,9 +484,7 @@ struct Mdns::Impl {
             };
             for (const auto& [id, p] : pubs) {
                 if (match(kServicesName, rrtype::PTR)) {
-                    auto rr = record(kServicesName, rrtype::PTR, false);
-                    rr.ptr = p.typeName();
-                    addUnique(answers, rr);
+                    addUnique(answers, mdns::ptrRecord(kServicesName, p.typeName(), cfg.otherTtl));
                     shared = true;
                 }
                 if (match(p.typeName(), rrtype::PTR)) {

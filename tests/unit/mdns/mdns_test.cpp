@@ -53,11 +53,13 @@ struct Host {
     pnp::testing::Inbox<Seen> events;  // declared first: outlives the engine that feeds it
     std::unique_ptr<Mdns> mdns;
 
-    Host(const Netns& ns, MdnsConfig c = config()) {
+    // Started in `ns`; waits until it has joined `interfaces` interfaces (throws if not).
+    explicit Host(const Netns& ns, std::size_t interfaces = 1) {
         inNetns(ns, [&] {
-            mdns = std::make_unique<Mdns>(c);
+            mdns = std::make_unique<Mdns>(config());
             mdns->start();
         });
+        if (!waitInterfaces(interfaces)) throw std::runtime_error("interfaces not joined");
     }
     void browse(const std::string& type = kType) {
         mdns->browse(type, [this](const DiscoveredService& s, bool up) {
@@ -123,6 +125,28 @@ std::optional<DnsMessage> replyTo(const UdpPeer& peer, std::uint16_t id) {
     return std::nullopt;
 }
 
+// A foreign host's announcement of one resolved service.
+std::vector<std::uint8_t> announcement(const std::string& instance, std::uint32_t ttl,
+                                       std::array<std::uint8_t, 4> address) {
+    DnsMessage m;
+    m.flags = DnsMessage::kResponseFlag | DnsMessage::kAuthoritativeFlag;
+    const std::string name = instance + "._opcua-tcp._tcp.local";
+    const std::string host = instance + "-host.local";
+    m.answers = {ptrRecord("_opcua-tcp._tcp.local", name, ttl),
+                 srvRecord(name, {0, 0, 4840, host}, ttl, true),
+                 txtRecord(name, {"path=/" + instance}, ttl, true),
+                 aRecord(host, address, ttl, true)};
+    return encode(m);
+}
+
+// A plain UDP socket in `ns` (see UdpPeer), for the mDNS group.
+std::unique_ptr<UdpPeer> udpPeer(const Netns& ns, std::uint16_t port, const std::string& ifName,
+                                 bool join = true) {
+    std::unique_ptr<UdpPeer> p;
+    inNetns(ns, [&] { p = std::make_unique<UdpPeer>(port, ifName, "224.0.0.251", join); });
+    return p;
+}
+
 long long msSince(Clock::time_point t0, Clock::time_point t) {
     return std::chrono::duration_cast<std::chrono::milliseconds>(t - t0).count();
 }
@@ -134,8 +158,6 @@ TEST(Mdns, PublishUpdateWithdrawAcrossHosts) {
     Netns a, b;
     link(a, "va", "10.77.1.1", b, "vb", "10.77.1.2");
     Host pub(a), browser(b);
-    ASSERT_TRUE(pub.waitInterfaces(1));
-    ASSERT_TRUE(browser.waitInterfaces(1));
     EXPECT_EQ(browser.mdns->interfaceNames(), std::vector<std::string>{"vb"});
     browser.browse();
 
@@ -175,8 +197,6 @@ TEST(Mdns, BrowseAfterPublishIsAnsweredAndShutdownSaysGoodbye) {
     Netns a, b;
     link(a, "va", "10.77.2.1", b, "vb", "10.77.2.2");
     Host pub(a), browser(b);
-    ASSERT_TRUE(pub.waitInterfaces(1));
-    ASSERT_TRUE(browser.waitInterfaces(1));
     pub.mdns->publish(service("late", "late-host"));
     std::this_thread::sleep_for(300ms);  // the first announcement went unheard
     auto t0 = Clock::now();
@@ -194,33 +214,15 @@ TEST(Mdns, RecordsExpireAfterTheirTtlAndAreRefreshedBefore) {
     Netns a, b;
     link(a, "va", "10.77.3.1", b, "vb", "10.77.3.2");
     Host browser(b);
-    ASSERT_TRUE(browser.waitInterfaces(1));
     browser.browse();
     // A foreign responder that announces once with TTL 2 s and then goes silent.
-    std::unique_ptr<UdpPeer> peer;
-    inNetns(a, [&] { peer = std::make_unique<UdpPeer>(kPort, "va", "224.0.0.251"); });
-    DnsMessage m;
-    m.flags = DnsMessage::kResponseFlag | DnsMessage::kAuthoritativeFlag;
-    ResourceRecord ptr, srv, txt, addr;
-    ptr.name = "_opcua-tcp._tcp.local";
-    ptr.type = rrtype::PTR;
-    ptr.ptr = "short._opcua-tcp._tcp.local";
-    srv.name = txt.name = ptr.ptr;
-    srv.type = rrtype::SRV;
-    srv.srv = {0, 0, 4841, "short-host.local"};
-    txt.type = rrtype::TXT;
-    txt.txt = {"path=/x"};
-    addr.name = "short-host.local";
-    addr.type = rrtype::A;
-    addr.ipv4 = {10, 77, 3, 1};
-    for (auto* r : {&ptr, &srv, &txt, &addr}) r->ttl = 2;
-    m.answers = {ptr, srv, txt, addr};
+    auto peer = udpPeer(a, kPort, "va");
     auto t0 = Clock::now();
-    peer->sendToGroup(encode(m), kPort);
+    peer->sendToGroup(announcement("short", 2, {10, 77, 3, 1}), kPort);
     auto up = browser.waitEvent("short", true, 2000ms);
     ASSERT_TRUE(up);
-    EXPECT_EQ(up->service.port, 4841);
-    EXPECT_EQ(up->service.txtValue("path"), "/x");
+    EXPECT_EQ(up->service.host, "short-host.local");
+    EXPECT_EQ(up->service.txtValue("path"), "/short");
 
     // The browser asks again at 80 % of the TTL (1.6 s).
     bool refreshed = false;
@@ -230,7 +232,9 @@ TEST(Mdns, RecordsExpireAfterTheirTtlAndAreRefreshedBefore) {
         try {
             DnsMessage q = decode(p->bytes);
             for (const auto& qu : q.questions) {
-                if (!q.isResponse() && namesEqual(qu.name, ptr.ptr)) refreshed = true;
+                if (!q.isResponse() && namesEqual(qu.name, "short._opcua-tcp._tcp.local")) {
+                    refreshed = true;
+                }
             }
         } catch (const DnsError&) {
         }
@@ -250,8 +254,6 @@ TEST(Mdns, NewcomerWithTheSameInstanceNameIsRenamed) {
     link(a, "va", "10.77.4.1", b, "vb", "10.77.4.2");
     pnp::testing::Inbox<std::string> renamedFirst, renamedSecond;  // outlive the engines
     Host first(a), second(b);
-    ASSERT_TRUE(first.waitInterfaces(1));
-    ASSERT_TRUE(second.waitInterfaces(1));
     first.browse();
     second.browse();
     first.mdns->publish(service("robot", "host-a"),
@@ -276,8 +278,6 @@ TEST(Mdns, SimultaneousConflictRenamesExactlyOne) {
     link(a, "va", "10.77.5.1", b, "vb", "10.77.5.2");
     pnp::testing::Inbox<std::string> renames;  // outlives the engines
     Host ha(a), hb(b);
-    ASSERT_TRUE(ha.waitInterfaces(1));
-    ASSERT_TRUE(hb.waitInterfaces(1));
     ha.mdns->publish(service("cell", "host-a"), [&](const std::string& n) { renames.put(n); });
     hb.mdns->publish(service("cell", "host-b"), [&](const std::string& n) { renames.put(n); });
     ASSERT_TRUE(renames.waitForCount(1, 3000ms)) << "conflict not detected";
@@ -291,8 +291,6 @@ TEST(Mdns, TwoEnginesOnOneHostSeeEachOther) {
     Netns a, b;
     link(a, "va", "10.77.6.1", b, "vb", "10.77.6.2");
     Host pub(a), browser(a);  // same namespace, same port (SO_REUSEPORT), multicast loop
-    ASSERT_TRUE(pub.waitInterfaces(1));
-    ASSERT_TRUE(browser.waitInterfaces(1));
     browser.browse();
     pub.mdns->publish(service("local-peer", "lp-host"));
     auto up = browser.waitEvent("local-peer", true, 2000ms);
@@ -305,10 +303,7 @@ TEST(Mdns, SeveralInterfacesAndInterfaceChanges) {
     Netns a, b, c;
     link(a, "vab", "10.77.7.1", b, "vba", "10.77.7.2");
     link(a, "vac", "10.77.8.1", c, "vca", "10.77.8.2");
-    Host ha(a), hb(b), hc(c);
-    ASSERT_TRUE(ha.waitInterfaces(2));
-    ASSERT_TRUE(hb.waitInterfaces(1));
-    ASSERT_TRUE(hc.waitInterfaces(1));
+    Host ha(a, 2), hb(b), hc(c);
     ha.browse();
     hb.browse();
     hc.browse();
@@ -340,7 +335,7 @@ TEST(Mdns, SeveralInterfacesAndInterfaceChanges) {
 
     // A new link to a new host D: A joins it and announces there, and its browse finds D.
     Netns d;
-    Host hd(d);
+    Host hd(d, 0);
     hd.browse();
     hd.mdns->publish(service("on-d", "d-host"));
     t0 = Clock::now();
@@ -359,10 +354,8 @@ TEST(Mdns, LegacyUnicastQueryGetsAUnicastAnswerAndGarbageIsIgnored) {
     Netns a, b;
     link(a, "va", "10.77.10.1", b, "vb", "10.77.10.2");
     Host pub(a);
-    ASSERT_TRUE(pub.waitInterfaces(1));
     pub.mdns->publish(service("legacy", "legacy-host"));
-    std::unique_ptr<UdpPeer> resolver;
-    inNetns(b, [&] { resolver = std::make_unique<UdpPeer>(0, "vb", "224.0.0.251"); });
+    auto resolver = udpPeer(b, 0, "vb");
 
     // Garbage first: the engine must survive it.
     std::mt19937 rng(7);
@@ -408,11 +401,9 @@ TEST(Mdns, QuQuestionIsAnsweredByUnicast) {
     Netns a, b;
     link(a, "va", "10.77.14.1", b, "vb", "10.77.14.2");
     Host pub(a);
-    ASSERT_TRUE(pub.waitInterfaces(1));
     pub.mdns->publish(service("qu", "qu-host"));
     // Port 15353 like a full mDNS querier, but not in the group: only unicast reaches it.
-    std::unique_ptr<UdpPeer> querier;
-    inNetns(b, [&] { querier = std::make_unique<UdpPeer>(kPort, "vb", "224.0.0.251", false); });
+    auto querier = udpPeer(b, kPort, "vb", false);
     DnsMessage q;
     q.id = 0x5151;  // mDNS responders answer QU with ID 0 (not legacy): matched below
     q.questions.push_back({"qu._opcua-tcp._tcp.local", rrtype::SRV, kClassIn, true});
@@ -442,8 +433,6 @@ TEST(Mdns, LargeAnswersAreSplitIntoPackets) {
     Netns a, b;
     link(a, "va", "10.77.15.1", b, "vb", "10.77.15.2");
     Host pub(a), browser(b);
-    ASSERT_TRUE(pub.waitInterfaces(1));
-    ASSERT_TRUE(browser.waitInterfaces(1));
     // 30 PTRs of ~75 bytes each (long instance labels): more than one 1440-byte packet.
     constexpr int kCount = 30;
     for (int i = 0; i < kCount; ++i) {
@@ -461,8 +450,7 @@ TEST(Mdns, LargeAnswersAreSplitIntoPackets) {
 
     // A query without known answers: all 30 PTRs come back, split into packets of at most
     // 1440 bytes of payload.
-    std::unique_ptr<UdpPeer> querier;
-    inNetns(b, [&] { querier = std::make_unique<UdpPeer>(kPort, "vb", "224.0.0.251"); });
+    auto querier = udpPeer(b, kPort, "vb");
     std::this_thread::sleep_for(3500ms);  // the announcements are over
     while (querier->receive(10ms)) {
     }
@@ -487,21 +475,14 @@ TEST(Mdns, KnownAnswerSuppressesTheReply) {
     Netns a, b;
     link(a, "va", "10.77.11.1", b, "vb", "10.77.11.2");
     Host pub(a);
-    ASSERT_TRUE(pub.waitInterfaces(1));
     pub.mdns->publish(service("known", "known-host"));
-    std::unique_ptr<UdpPeer> querier;
-    inNetns(b, [&] { querier = std::make_unique<UdpPeer>(kPort, "vb", "224.0.0.251"); });
+    auto querier = udpPeer(b, kPort, "vb");
     std::this_thread::sleep_for(3500ms);  // let the announcements pass
     while (querier->receive(10ms)) {
     }
     DnsMessage q;
     q.questions.push_back({"_opcua-tcp._tcp.local", rrtype::PTR, kClassIn, false});
-    ResourceRecord known;
-    known.name = "_opcua-tcp._tcp.local";
-    known.type = rrtype::PTR;
-    known.ttl = 100;
-    known.ptr = "known._opcua-tcp._tcp.local";
-    q.answers.push_back(known);
+    q.answers.push_back(ptrRecord("_opcua-tcp._tcp.local", "known._opcua-tcp._tcp.local", 100));
     querier->sendToGroup(encode(q), kPort);
     auto answered = [&] {
         auto end = Clock::now() + 500ms;
@@ -521,41 +502,13 @@ TEST(Mdns, KnownAnswerSuppressesTheReply) {
     EXPECT_TRUE(answered());
 }
 
-namespace {
-
-// A foreign host's announcement of one resolved service.
-std::vector<std::uint8_t> announcement(const std::string& instance, std::uint32_t ttl,
-                                       std::array<std::uint8_t, 4> address) {
-    DnsMessage m;
-    m.flags = DnsMessage::kResponseFlag | DnsMessage::kAuthoritativeFlag;
-    ResourceRecord ptr, srv, txt, a;
-    ptr.name = "_opcua-tcp._tcp.local";
-    ptr.type = rrtype::PTR;
-    ptr.ptr = instance + "._opcua-tcp._tcp.local";
-    srv.name = txt.name = ptr.ptr;
-    srv.type = rrtype::SRV;
-    srv.srv = {0, 0, 4840, instance + "-host.local"};
-    txt.type = rrtype::TXT;
-    txt.txt = {"path=/"};
-    a.name = srv.srv.target;
-    a.type = rrtype::A;
-    a.ipv4 = address;
-    for (auto* r : {&ptr, &srv, &txt, &a}) r->ttl = ttl;
-    m.answers = {ptr, srv, txt, a};
-    return encode(m);
-}
-
-}  // namespace
-
 TEST(Mdns, CacheStaysBoundedUnderAFlood) {
     SKIP_WITHOUT_NETNS();
     Netns a, b;
     link(a, "va", "10.77.12.1", b, "vb", "10.77.12.2");
     Host browser(b);
-    ASSERT_TRUE(browser.waitInterfaces(1));
     browser.browse();
-    std::unique_ptr<UdpPeer> peer;
-    inNetns(a, [&] { peer = std::make_unique<UdpPeer>(kPort, "va", "224.0.0.251"); });
+    auto peer = udpPeer(a, kPort, "va");
     // 1500 services = 6000 records, beyond the 4096-record cache.
     for (int i = 0; i < 1500; ++i) {
         peer->sendToGroup(announcement("flood-" + std::to_string(i), 120, {10, 77, 12, 1}), kPort);
@@ -578,8 +531,6 @@ TEST(Mdns, NoCallbackAfterStopBrowseReturns) {
     link(a, "va", "10.77.13.1", b, "vb", "10.77.13.2");
     std::atomic<int> calls{0};  // outlives the engines
     Host pub(a), browser(b);
-    ASSERT_TRUE(pub.waitInterfaces(1));
-    ASSERT_TRUE(browser.waitInterfaces(1));
     auto id = browser.mdns->browse(kType, [&](const DiscoveredService&, bool) {
         ++calls;
         std::this_thread::sleep_for(50ms);  // a slow consumer
