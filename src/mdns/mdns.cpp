@@ -128,6 +128,7 @@ struct Outgoing {
     int ifIndex;
     sockaddr_in dest;
     std::vector<std::uint8_t> bytes;
+    std::vector<Mdns::PublicationId> from;  // whose records it carries
 };
 
 }  // namespace
@@ -281,7 +282,10 @@ struct Mdns::Impl {
         return out;
     }
 
-    void send(int ifIndex, const sockaddr_in& dest, DnsMessage m, TimePoint at = {}) {
+    // at > now: delayed (a shared answer); `from` names the publications in it, so that a
+    // goodbye can cancel it (else it would bring the records back after the goodbye).
+    void send(int ifIndex, const sockaddr_in& dest, DnsMessage m, TimePoint at = {},
+              const std::vector<PublicationId>& from = {}) {
         std::vector<std::vector<std::uint8_t>> ps;
         try {
             ps = packets(std::move(m));
@@ -292,7 +296,7 @@ struct Mdns::Impl {
             if (at <= Clock::now()) {
                 sendRaw(ifIndex, dest, p);
             } else if (outgoing.size() < kMaxOutgoing) {
-                outgoing.push_back({at, ifIndex, dest, std::move(p)});
+                outgoing.push_back({at, ifIndex, dest, std::move(p), from});
             }
         }
     }
@@ -314,6 +318,9 @@ struct Mdns::Impl {
     }
 
     void goodbye(const Publication& p, bool withPtr) {
+        std::erase_if(outgoing, [&p](const Outgoing& o) {
+            return std::find(o.from.begin(), o.from.end(), p.id) != o.from.end();
+        });
         for (const auto& i : ifaces) {
             auto rs = allRecords(p, i);
             // After a conflict the PTR is the winner's too: its goodbye would remove that.
@@ -475,6 +482,7 @@ struct Mdns::Impl {
         bool unicast = legacy;
         bool shared = false;
         std::vector<ResourceRecord> answers, additionals;
+        std::vector<PublicationId> from;
         notePeerProbes(q);
         for (const auto& qu : q.questions) {
             if (qu.qclass != kClassIn && qu.qclass != 255) continue;
@@ -483,6 +491,7 @@ struct Mdns::Impl {
                 return (qu.type == type || qu.type == rrtype::ANY) && namesEqual(qu.name, name);
             };
             for (const auto& [id, p] : pubs) {
+                const std::size_t had = answers.size() + additionals.size();
                 if (match(kServicesName, rrtype::PTR)) {
                     addUnique(answers, mdns::ptrRecord(kServicesName, p.typeName(), cfg.otherTtl));
                     shared = true;
@@ -500,6 +509,7 @@ struct Mdns::Impl {
                 }
                 if (match(p.instanceName(), rrtype::TXT)) addUnique(answers, txtRecord(p));
                 if (match(p.hostName(), rrtype::A)) addUnique(answers, aRecord(p, i));
+                if (answers.size() + additionals.size() > had) from.push_back(id);
             }
             if (answers.size() > before && qu.unicastResponse) unicast = true;
         }
@@ -536,7 +546,7 @@ struct Mdns::Impl {
             std::uniform_int_distribution<int> d(20, 120);  // RFC 6762 §6
             at = Clock::now() + milliseconds(d(rng));
         }
-        send(i.index, groupAddr(), std::move(r), at);
+        send(i.index, groupAddr(), std::move(r), at, from);
     }
 
     // Remembers the SRV records in others' probes (authority section) for a while.
@@ -746,7 +756,8 @@ struct Mdns::Impl {
         nextWake = now + seconds(1);
         if (now >= nextIfaceCheck) {
             updateInterfaces();
-            nextIfaceCheck = now + cfg.interfaceCheckInterval;
+            // At least 10 ms: an interval of 0 would make the loop spin.
+            nextIfaceCheck = now + std::max(cfg.interfaceCheckInterval, milliseconds(10));
         }
         at(nextIfaceCheck);
         tickPublications(now);
@@ -943,8 +954,7 @@ struct Mdns::Impl {
             if (fds[0].revents) receive();
         }
         for (const auto& [id, p] : pubs) goodbye(p, true);
-        // Delayed responses are dropped; queued goodbyes (withdraw just before stop) go out.
-        tickOutgoing(Clock::time_point::max());
+        outgoing.clear();  // delayed answers would bring the records back
         deliver(lock);
     }
 

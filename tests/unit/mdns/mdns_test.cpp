@@ -209,6 +209,25 @@ TEST(Mdns, BrowseAfterPublishIsAnsweredAndShutdownSaysGoodbye) {
     EXPECT_TRUE(browser.waitEvent("late", false, 2000ms)) << "no goodbye on shutdown";
 }
 
+TEST(Mdns, StopSaysGoodbyeAndStartAnnouncesAgain) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.16.1", b, "vb", "10.77.16.2");
+    Host pub(a), browser(b);
+    browser.browse();
+    pub.mdns->publish(service("restart", "restart-host"));
+    ASSERT_TRUE(browser.waitEvent("restart", true, 2000ms));
+    pub.mdns->stop();
+    ASSERT_TRUE(browser.waitEvent("restart", false, 2000ms)) << "no goodbye on stop()";
+    EXPECT_TRUE(pub.mdns->interfaceNames().empty());
+    inNetns(a, [&] { pub.mdns->start(); });  // the sockets belong to the caller's namespace
+    auto ups = [](const std::vector<Seen>& v) {
+        return std::count_if(v.begin(), v.end(), [](const Seen& e) { return e.up; });
+    };
+    EXPECT_TRUE(browser.events.waitFor([&](const auto& v) { return ups(v) >= 2; }, 2000ms))
+        << "not announced after start()";
+}
+
 TEST(Mdns, RecordsExpireAfterTheirTtlAndAreRefreshedBefore) {
     SKIP_WITHOUT_NETNS();
     Netns a, b;
