@@ -79,6 +79,17 @@ void addUnique(std::vector<ResourceRecord>& v, const ResourceRecord& rr) {
     v.push_back(rr);
 }
 
+// "base (n)", the base shortened (at a UTF-8 character boundary) to keep within a label.
+std::string renamed(const std::string& base, int n) {
+    std::string suffix = " (" + std::to_string(n) + ")";
+    std::size_t keep = std::min(base.size(), kMaxLabelLength - suffix.size());
+    while (keep > 0 && keep < base.size() &&
+           (static_cast<unsigned char>(base[keep]) & 0xC0) == 0x80) {
+        --keep;
+    }
+    return base.substr(0, keep) + suffix;
+}
+
 struct Interface {
     std::string name;
     int index = 0;
@@ -93,7 +104,8 @@ struct Publication {
     std::function<void(const std::string&)> onRename;
     int probesSent = 0;
     TimePoint nextProbe{};
-    TimePoint probeEnd{};  // 250 ms after the last probe
+    TimePoint probeEnd{};     // 250 ms after the last probe
+    TimePoint lastDefence{};  // defending announcements are rate-limited
     // Pending announcements: (time, interface index; 0 = every interface).
     std::vector<std::pair<TimePoint, int>> announcements;
 
@@ -164,7 +176,7 @@ struct Mdns::Impl {
     std::map<PublicationId, Publication> pubs;
     std::map<BrowseId, Browse> browses;
     std::vector<CacheEntry> cache;
-    std::vector<Outgoing> outgoing;  // delayed responses and queued goodbyes
+    std::vector<Outgoing> outgoing;  // delayed (shared) answers
     std::set<std::string> oneShotQueries;
     // (interface, name) -> next resolve query and its back-off.
     std::map<std::pair<int, std::string>, std::pair<TimePoint, milliseconds>> resolving;
@@ -584,7 +596,11 @@ struct Mdns::Impl {
             if (p.probing() && !theyProbe) {
                 lose = true;
             } else if (!p.probing() && theyProbe) {
-                announce(p, 0);  // defend at once
+                // Defend at once, but not once per packet of a probe flood.
+                if (Clock::now() - p.lastDefence >= kProbeInterval) {
+                    p.lastDefence = Clock::now();
+                    announce(p, 0);
+                }
             } else {
                 lose = std::lexicographical_compare(mine.begin(), mine.end(), other.begin(),
                                                     other.end());
@@ -596,7 +612,7 @@ struct Mdns::Impl {
 
     void rename(Publication& p) {
         goodbye(p, false);
-        p.rec.instance = p.baseInstance + " (" + std::to_string(++p.renames) + ")";
+        p.rec.instance = renamed(p.baseInstance, ++p.renames);
         p.probesSent = 0;
         p.nextProbe = Clock::now();
         p.announcements.clear();
@@ -1087,9 +1103,9 @@ Mdns::PublicationId Mdns::publish(ServiceRecord record,
             throw std::invalid_argument("mdns: bad IPv4 address " + *p.rec.address);
         }
     }
-    // Room for " (99)" after the instance label; the rest must encode.
-    if (p.rec.instance.empty() || p.rec.instance.size() + 5 > kMaxLabelLength ||
-        p.rec.host.empty() || p.rec.host.size() > kMaxLabelLength) {
+    // Labels of 1-63 bytes (a rename shortens the base to fit " (n)"); the rest must encode.
+    if (p.rec.instance.empty() || p.rec.instance.size() > kMaxLabelLength || p.rec.host.empty() ||
+        p.rec.host.size() > kMaxLabelLength) {
         throw std::invalid_argument("mdns: instance or host label empty or too long");
     }
     try {

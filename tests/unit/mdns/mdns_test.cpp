@@ -303,6 +303,13 @@ TEST(Mdns, SimultaneousConflictRenamesExactlyOne) {
     std::this_thread::sleep_for(1500ms);  // no second rename follows
     ASSERT_EQ(renames.items().size(), 1u);
     EXPECT_EQ(renames.items().front(), "cell (2)");
+
+    // A 63-byte label (the maximum) is shortened to make room for the suffix.
+    const std::string longName(63, 'L');
+    ha.mdns->publish(service(longName, "host-a"), [&](const std::string& n) { renames.put(n); });
+    hb.mdns->publish(service(longName, "host-b"), [&](const std::string& n) { renames.put(n); });
+    ASSERT_TRUE(renames.waitForCount(2, 3000ms)) << "conflict of long names not detected";
+    EXPECT_EQ(renames.items()[1], std::string(59, 'L') + " (2)");
 }
 
 TEST(Mdns, TwoEnginesOnOneHostSeeEachOther) {
