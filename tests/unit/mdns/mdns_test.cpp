@@ -54,9 +54,9 @@ struct Host {
     std::unique_ptr<Mdns> mdns;
 
     // Started in `ns`; waits until it has joined `interfaces` interfaces (throws if not).
-    explicit Host(const Netns& ns, std::size_t interfaces = 1) {
+    explicit Host(const Netns& ns, std::size_t interfaces = 1, MdnsConfig c = config()) {
         inNetns(ns, [&] {
-            mdns = std::make_unique<Mdns>(config());
+            mdns = std::make_unique<Mdns>(c);
             mdns->start();
         });
         if (!waitInterfaces(interfaces)) throw std::runtime_error("interfaces not joined");
@@ -570,4 +570,32 @@ TEST(Mdns, NoCallbackAfterStopBrowseReturns) {
     pub.mdns->publish(service("cb-late", "cb-host"));
     std::this_thread::sleep_for(500ms);
     EXPECT_EQ(calls.load(), after);
+}
+
+TEST(Mdns, SharesPort5353WithAnotherSocketAndHonoursTheInterfaceList) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b, c;
+    link(a, "vab", "10.77.17.1", b, "vba", "10.77.17.2");
+    link(a, "vac", "10.77.18.1", c, "vca", "10.77.18.2");
+    // Another mDNS socket (as avahi-daemon's) already bound to 5353 in the same namespace.
+    auto other = udpPeer(a, 5353, "vab");
+    MdnsConfig cfg = config();
+    cfg.port = 5353;
+    cfg.interfaces = {"vab"};  // only this one of the two
+    Host pub(a, 1, cfg);
+    EXPECT_EQ(pub.mdns->interfaceNames(), std::vector<std::string>{"vab"});
+    pub.mdns->publish(service("shared-port", "sp-host"));
+    bool heard = false;
+    auto end = Clock::now() + 2s;
+    while (!heard && Clock::now() < end) {
+        auto p = other->receive(100ms);
+        if (!p) continue;
+        try {
+            DnsMessage m = decode(p->bytes);
+            heard = m.isResponse() && !m.answers.empty() &&
+                    m.answers[0].ptr == "shared-port._opcua-tcp._tcp.local";
+        } catch (const DnsError&) {
+        }
+    }
+    EXPECT_TRUE(heard) << "the other socket on 5353 did not get the announcement";
 }
