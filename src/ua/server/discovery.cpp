@@ -72,6 +72,7 @@ void LocalDiscovery::stop() {
         std::lock_guard lock(mutex_);
         stopping_ = true;
         pending_.clear();
+        overflowed_ = false;
     }
     wake_.notify_all();
     if (thread_.joinable() && thread_.get_id() != std::this_thread::get_id()) thread_.join();
@@ -240,6 +241,10 @@ std::vector<Registration> LocalDiscovery::registeredServers() const {
 void LocalDiscovery::queueLocked(RegistrationEvent event) {
     // Without observers nobody waits for events: do not pile them up.
     if (observers_.empty()) return;
+    if (pending_.size() >= config_.maxPendingEvents) {
+        overflowed_ = true;
+        return;
+    }
     pending_.push_back(std::move(event));
     wake_.notify_all();
 }
@@ -435,9 +440,15 @@ void LocalDiscovery::run() {
             std::string uri = expiry_.begin()->second;
             removeLocked(uri, RegistrationEvent::Reason::Expired);
         }
-        if (!pending_.empty()) {
+        if (!pending_.empty() || overflowed_) {
             auto events = std::move(pending_);
             pending_.clear();
+            if (overflowed_) {
+                RegistrationEvent lost;
+                lost.kind = RegistrationEvent::Kind::Overflow;
+                events.push_back(std::move(lost));
+                overflowed_ = false;
+            }
             std::vector<Observer> observers;
             for (const auto& [id, o] : observers_) observers.push_back(o);
             lock.unlock();

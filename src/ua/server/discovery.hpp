@@ -55,6 +55,9 @@ struct DiscoveryConfig {
     std::size_t maxStringLength = 4096;     // serverUri, a URL, a name, a capability, a path
     std::size_t maxListLength = 32;         // discoveryUrls, serverNames, capabilities, configs
     std::size_t maxNetworkRecords = 10000;  // records fed in by the mDNS glue
+    // Events waiting for slow observers; beyond it they are dropped and one Overflow event
+    // follows (so a stuck observer cannot make clients' requests grow the queue forever).
+    std::size_t maxPendingEvents = 10000;
 };
 
 // One registered server as the LDS keeps it.
@@ -64,7 +67,9 @@ struct Registration {
 };
 
 struct RegistrationEvent {
-    enum class Kind { Added, Updated, Removed };
+    // Overflow: events were dropped (maxPendingEvents) because the observers fell behind;
+    // re-read registeredServers() to resynchronise. It carries no registration.
+    enum class Kind { Added, Updated, Removed, Overflow };
     enum class Reason {
         Registered,    // Added: a new serverUri
         Replaced,      // Updated: a re-registration changed its data (previous = the old one)
@@ -174,6 +179,7 @@ class LocalDiscovery {
     std::optional<NetworkRecord> self_;
 
     std::vector<RegistrationEvent> pending_;  // delivered by run()
+    bool overflowed_ = false;                 // events were dropped since the last delivery
     std::map<std::size_t, Observer> observers_;
     std::size_t nextObserverId_ = 1;
 };
