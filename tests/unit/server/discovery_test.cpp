@@ -10,6 +10,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <mutex>
 #include <thread>
 
@@ -123,14 +124,26 @@ struct Events {
     }
 };
 
+// Each test: a started server (the LDS on unless the test says otherwise) and a client
+// connected to it.
+class Discovery : public ::testing::Test {
+  protected:
+    void start(server::ServerConfig cfg = ldsConfig()) {
+        server = std::make_unique<server::Server>(std::move(cfg));
+        server->start();
+        c.connect(url(*server));
+    }
+    server::LocalDiscovery& lds() { return *server->localDiscovery(); }
+
+    std::unique_ptr<server::Server> server;
+    Client c;  // declared after the server: disconnects before it stops
+};
+
 }  // namespace
 
-TEST(Discovery, OffMeansServiceUnsupported) {
-    server::Server server(pnp::testing::loopbackConfig());
-    server.start();
-    EXPECT_EQ(server.localDiscovery(), nullptr);
-    Client c;
-    c.connect(url(server));
+TEST_F(Discovery, OffMeansServiceUnsupported) {
+    start(pnp::testing::loopbackConfig());
+    EXPECT_EQ(server->localDiscovery(), nullptr);
     EXPECT_EQ(registerOne(c, device("urn:dev:1")), status::BadServiceUnsupported);
     EXPECT_EQ(errorOf([&] { c.request(withMdns(device("urn:dev:1"), "dev", {})); }),
               status::BadServiceUnsupported);
@@ -141,11 +154,8 @@ TEST(Discovery, OffMeansServiceUnsupported) {
     EXPECT_EQ(servers[0].applicationUri, "urn:pnp:server");
 }
 
-TEST(Discovery, RegisterFindAndLocales) {
-    server::Server server(ldsConfig());
-    server.start();
-    Client c;
-    c.connect(url(server));
+TEST_F(Discovery, RegisterFindAndLocales) {
+    start();
     ASSERT_EQ(registerOne(c, device("urn:dev:1")), status::Good);
     ASSERT_EQ(registerOne(c, device("urn:dev:2", "opc.tcp://dev2:4840")), status::Good);
 
@@ -169,17 +179,14 @@ TEST(Discovery, RegisterFindAndLocales) {
     EXPECT_EQ(find(c, {"urn:dev:1"}, {"fr"}).at(0).applicationName.locale, "en");
     EXPECT_EQ(find(c, {"urn:pnp:lds"}).size(), 1u);
 
-    auto snapshot = server.localDiscovery()->registeredServers();
+    auto snapshot = lds().registeredServers();
     EXPECT_EQ(snapshot.size(), 2u);
 }
 
-TEST(Discovery, ReRegisterRefreshesAndUpdates) {
-    server::Server server(ldsConfig(300ms));
+TEST_F(Discovery, ReRegisterRefreshesAndUpdates) {
+    start(ldsConfig(300ms));
     Events events;
-    events.attach(*server.localDiscovery());
-    server.start();
-    Client c;
-    c.connect(url(server));
+    events.attach(lds());
     auto s = device("urn:dev:1");
     ASSERT_EQ(registerOne(c, s), status::Good);
     // Renewed every 100 ms for 600 ms: twice the expiry, still there.
@@ -204,19 +211,16 @@ TEST(Discovery, ReRegisterRefreshesAndUpdates) {
     EXPECT_EQ(upd.registration.server.productUri, "urn:pnp:device:v2");
 }
 
-TEST(Discovery, IsOnlineFalseRemovesAtOnce) {
-    server::Server server(ldsConfig());
+TEST_F(Discovery, IsOnlineFalseRemovesAtOnce) {
+    start();
     Events events;
-    events.attach(*server.localDiscovery());
-    server.start();
-    Client c;
-    c.connect(url(server));
+    events.attach(lds());
     auto s = device("urn:dev:1");
     ASSERT_EQ(registerOne(c, s), status::Good);
     s.isOnline = false;
     ASSERT_EQ(registerOne(c, s), status::Good);
     EXPECT_FALSE(lists(find(c), "urn:dev:1"));
-    EXPECT_TRUE(server.localDiscovery()->registeredServers().empty());
+    EXPECT_TRUE(lds().registeredServers().empty());
     // Unregistering what is not registered (expired meanwhile) is fine.
     ASSERT_EQ(registerOne(c, s), status::Good);
     ASSERT_TRUE(events.waitFor(2));
@@ -225,13 +229,10 @@ TEST(Discovery, IsOnlineFalseRemovesAtOnce) {
     EXPECT_EQ(events.seen[1].first.reason, server::RegistrationEvent::Reason::Unregistered);
 }
 
-TEST(Discovery, ExpiresWithin100msOfTheDeadline) {
-    server::Server server(ldsConfig(300ms));
+TEST_F(Discovery, ExpiresWithin100msOfTheDeadline) {
+    start(ldsConfig(300ms));
     Events events;
-    events.attach(*server.localDiscovery());
-    server.start();
-    Client c;
-    c.connect(url(server));
+    events.attach(lds());
     auto s = withMdns(device("urn:dev:1"), "gripper", {"DA"});
     c.request(RegisterServer2Request(s));
     auto registered = Steady::now();  // the response came back: the deadline is before now+300
@@ -254,11 +255,8 @@ TEST(Discovery, ExpiresWithin100msOfTheDeadline) {
     EXPECT_EQ(onNetwork(c).servers.size(), 1u);
 }
 
-TEST(Discovery, ValidationErrors) {
-    server::Server server(ldsConfig());
-    server.start();
-    Client c;
-    c.connect(url(server));
+TEST_F(Discovery, ValidationErrors) {
+    start();
     auto bad = [&](auto change) {
         auto s = device("urn:dev:1");
         change(s);
@@ -283,7 +281,7 @@ TEST(Discovery, ValidationErrors) {
     EXPECT_EQ(bad([](auto& s) { s.discoveryUrls = {std::string(5000, 'x')}; }),
               status::BadInvalidArgument);
     EXPECT_EQ(bad([](auto& s) { s.productUri.assign(5000, 'p'); }), status::BadInvalidArgument);
-    EXPECT_TRUE(server.localDiscovery()->registeredServers().empty());
+    EXPECT_TRUE(lds().registeredServers().empty());
 
     // An existing semaphore file is accepted.
     std::string path = ::testing::TempDir() + "pnp-lds-semaphore";
@@ -292,21 +290,15 @@ TEST(Discovery, ValidationErrors) {
     std::remove(path.c_str());
 }
 
-TEST(Discovery, InsecureRegistrationCanBeRefused) {
+TEST_F(Discovery, InsecureRegistrationCanBeRefused) {
     auto cfg = ldsConfig();
     cfg.discovery.allowInsecureRegistration = false;
-    server::Server server(cfg);
-    server.start();
-    Client c;
-    c.connect(url(server));
+    start(cfg);
     EXPECT_EQ(registerOne(c, device("urn:dev:1")), status::BadSecurityModeInsufficient);
 }
 
-TEST(Discovery, RegisterServer2ConfigurationResults) {
-    server::Server server(ldsConfig());
-    server.start();
-    Client c;
-    c.connect(url(server));
+TEST_F(Discovery, RegisterServer2ConfigurationResults) {
+    start();
     auto req = withMdns(device("urn:dev:1"), "gripper", {"DA", "LDS"});
     req.discoveryConfiguration.push_back(toExtensionObject(BuildInfo{}));  // not a discovery config
     ExtensionObject broken = req.discoveryConfiguration[0];
@@ -316,7 +308,7 @@ TEST(Discovery, RegisterServer2ConfigurationResults) {
     EXPECT_EQ(resp.configurationResults,
               (std::vector<StatusCode>{status::Good, status::BadNotSupported,
                                        status::BadInvalidArgument}));
-    auto regs = server.localDiscovery()->registeredServers();
+    auto regs = lds().registeredServers();
     ASSERT_EQ(regs.size(), 1u);
     ASSERT_TRUE(regs[0].mdns);
     EXPECT_EQ(regs[0].mdns->serverCapabilities, (std::vector<String>{"DA", "LDS"}));
@@ -326,17 +318,14 @@ TEST(Discovery, RegisterServer2ConfigurationResults) {
     EXPECT_EQ(errorOf([&] { c.request(req); }), status::BadTooManyOperations);
 }
 
-TEST(Discovery, FindServersOnNetworkPagingFilterAndIds) {
-    server::Server server(ldsConfig());
-    server.start();
-    Client c;
-    c.connect(url(server));
-    auto& lds = *server.localDiscovery();
+TEST_F(Discovery, FindServersOnNetworkPagingFilterAndIds) {
+    start();
+    auto& lds = this->lds();
 
     auto self = onNetwork(c).servers;
     ASSERT_EQ(self.size(), 1u);
     EXPECT_EQ(self[0].serverName, "cell-lds");
-    EXPECT_EQ(self[0].discoveryUrl, url(server));
+    EXPECT_EQ(self[0].discoveryUrl, url(*server));
     EXPECT_EQ(self[0].serverCapabilities, std::vector<String>{"LDS"});
 
     auto a = device("urn:dev:a", "opc.tcp://a:4840");
@@ -396,12 +385,9 @@ TEST(Discovery, FindServersOnNetworkPagingFilterAndIds) {
     EXPECT_GT(again.back().recordId, std::max(maxBefore, netId));  // after every earlier id
 }
 
-TEST(Discovery, RecordCounterWrapResetsAndReportsTheTime) {
-    server::Server server(ldsConfig());
-    server.start();
-    Client c;
-    c.connect(url(server));
-    auto& lds = *server.localDiscovery();
+TEST_F(Discovery, RecordCounterWrapResetsAndReportsTheTime) {
+    start();
+    auto& lds = this->lds();
     auto before = onNetwork(c).lastCounterResetTime;
     lds.setNextRecordIdForTesting(0xFFFFFFFEu);
     EXPECT_EQ(lds.addNetworkRecord({"n1", "opc.tcp://n1:1", {}}), 0xFFFFFFFEu);
@@ -417,13 +403,10 @@ TEST(Discovery, RecordCounterWrapResetsAndReportsTheTime) {
     EXPECT_GT(r.lastCounterResetTime, before);
 }
 
-TEST(Discovery, MaxRegisteredServers) {
+TEST_F(Discovery, MaxRegisteredServers) {
     auto cfg = ldsConfig();
     cfg.discovery.maxRegisteredServers = 2;
-    server::Server server(cfg);
-    server.start();
-    Client c;
-    c.connect(url(server));
+    start(cfg);
     EXPECT_EQ(registerOne(c, device("urn:dev:1")), status::Good);
     EXPECT_EQ(registerOne(c, device("urn:dev:2")), status::Good);
     EXPECT_EQ(registerOne(c, device("urn:dev:3")), status::BadResourceUnavailable);
@@ -434,13 +417,11 @@ TEST(Discovery, MaxRegisteredServers) {
     EXPECT_EQ(registerOne(c, device("urn:dev:3")), status::Good);
 }
 
-TEST(Discovery, MalformedAndOversizedRequestsLeaveTheServerServing) {
-    server::Server server(ldsConfig());
-    server.start();
-    Client bad;
-    bad.connect(url(server));
+TEST_F(Discovery, MalformedAndOversizedRequestsLeaveTheServerServing) {
+    start();
+    Client& bad = c;
     Client good;
-    good.connect(url(server));
+    good.connect(url(*server));
 
     GarbledRegisterServer2Request g;
     g.tail = std::string("\x05\x00\x00\x00urn:x", 9) + "\xff\xff\xff\x7f";  // then a huge count
@@ -468,9 +449,40 @@ TEST(Discovery, MalformedAndOversizedRequestsLeaveTheServerServing) {
     EXPECT_EQ(find(good).size(), 3u);
 }
 
-TEST(Discovery, ObserversMayCallBackIntoTheLds) {
-    server::Server server(ldsConfig());
-    auto& lds = *server.localDiscovery();
+TEST_F(Discovery, ASlowObserverGetsAnOverflowInsteadOfAnEndlessQueue) {
+    auto cfg = ldsConfig();
+    cfg.discovery.maxPendingEvents = 4;
+    start(cfg);
+    std::mutex m;
+    std::condition_variable cv;
+    bool release = false;
+    std::vector<server::RegistrationEvent::Kind> kinds;
+    lds().onRegistrationsChanged([&](const server::RegistrationEvent& e) {
+        std::unique_lock lock(m);
+        kinds.push_back(e.kind);
+        cv.notify_all();
+        cv.wait_for(lock, 3s, [&] { return release; });  // stuck until the requests are in
+    });
+    ASSERT_EQ(registerOne(c, device("urn:dev:0")), status::Good);
+    {
+        std::unique_lock lock(m);
+        ASSERT_TRUE(cv.wait_for(lock, 3s, [&] { return kinds.size() == 1; }));
+    }
+    for (int i = 1; i <= 10; ++i)
+        ASSERT_EQ(registerOne(c, device("urn:dev:" + std::to_string(i))), status::Good);
+    std::unique_lock lock(m);
+    release = true;
+    cv.notify_all();
+    ASSERT_TRUE(cv.wait_for(lock, 3s, [&] { return kinds.size() == 6; }));
+    EXPECT_EQ(kinds.back(), server::RegistrationEvent::Kind::Overflow);  // 4 kept, then it
+    EXPECT_EQ(std::count(kinds.begin(), kinds.end(), server::RegistrationEvent::Kind::Added), 5);
+    lock.unlock();
+    EXPECT_EQ(lds().registeredServers().size(), 11u);  // the registrations themselves are kept
+}
+
+TEST_F(Discovery, ObserversMayCallBackIntoTheLds) {
+    start();
+    auto& lds = this->lds();
     std::mutex m;
     std::condition_variable cv;
     std::size_t seenRegistrations = 0;
@@ -484,9 +496,6 @@ TEST(Discovery, ObserversMayCallBackIntoTheLds) {
         called = true;
         cv.notify_all();
     });
-    server.start();
-    Client c;
-    c.connect(url(server));
     ASSERT_EQ(registerOne(c, device("urn:dev:1")), status::Good);
     std::unique_lock lock(m);
     ASSERT_TRUE(cv.wait_for(lock, 3s, [&] { return called; }));
@@ -508,11 +517,8 @@ double medianMs(int n, F&& f) {
 }
 }  // namespace
 
-TEST(Discovery, ThousandServersAnswerWithin5ms) {
-    server::Server server(ldsConfig(10min));
-    server.start();
-    Client c;
-    c.connect(url(server));
+TEST_F(Discovery, ThousandServersAnswerWithin5ms) {
+    start(ldsConfig(10min));
     for (int i = 0; i < 1000; ++i) {
         std::string id = std::to_string(i);
         c.request(withMdns(device("urn:pnp:dev:" + id, "opc.tcp://dev-" + id + ".local:4840"),
