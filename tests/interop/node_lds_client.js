@@ -8,11 +8,8 @@
 // usage: node tests/interop/node_lds_client.js opc.tcp://127.0.0.1:PORT
 // The server must run with the LDS on and list nothing registered yet.
 
-const { urlArg, certificateManager, expect, checks } = require("./common");
+const { urlArg, noneClient, expect, checks } = require("./common");
 const {
-    OPCUAClient,
-    MessageSecurityMode,
-    SecurityPolicy,
     ApplicationType,
     RegisterServerRequest,
     RegisterServer2Request,
@@ -46,15 +43,7 @@ function transact(client, request) {
 }
 
 async function main() {
-    const client = OPCUAClient.create({
-        applicationName: "pnp-interop-node-lds-client",
-        clientCertificateManager: certificateManager("client"),
-        endpointMustExist: false,
-        securityMode: MessageSecurityMode.None,
-        securityPolicy: SecurityPolicy.None,
-        connectionStrategy: { maxRetry: 2, initialDelay: 250, maxDelay: 1000 },
-        transportTimeout: 10000,
-    });
+    const client = noneClient("pnp-interop-node-lds-client", { transportTimeout: 10000 });
     const connected = await check("connect", () => client.connect(url));
     if (!connected) abort();
 
