@@ -11,7 +11,7 @@ process.stdout.write = process.stderr.write.bind(process.stderr);
 
 const path = require("path");
 const os = require("os");
-const { OPCUACertificateManager } = require("node-opcua");
+const { OPCUACertificateManager, OPCUAClient, MessageSecurityMode, SecurityPolicy } = require("node-opcua");
 
 function usage(script, what) {
     console.error(`usage: ${script} ${what}`);
@@ -40,6 +40,20 @@ function certificateManager(kind) {
     return new OPCUACertificateManager({
         automaticallyAcceptUnknownCertificate: true,
         rootFolder: path.join(pkiRoot, kind),
+    });
+}
+
+// An OPCUAClient of the client scripts: SecurityPolicy None, a few quick reconnect attempts,
+// the PKI of certificateManager("client"); `extra` adds or overrides options.
+function noneClient(applicationName, extra = {}) {
+    return OPCUAClient.create({
+        applicationName,
+        clientCertificateManager: certificateManager("client"),
+        endpointMustExist: false,
+        securityMode: MessageSecurityMode.None,
+        securityPolicy: SecurityPolicy.None,
+        connectionStrategy: { maxRetry: 2, initialDelay: 250, maxDelay: 1000 },
+        ...extra,
     });
 }
 
@@ -139,6 +153,7 @@ module.exports = {
     portArg,
     urlArg,
     certificateManager,
+    noneClient,
     shutDownOnSignals,
     oneLine,
     withTimeout,

@@ -10,9 +10,8 @@
 //
 // usage: node tests/interop/node_client.js opc.tcp://127.0.0.1:4840
 
-const { urlArg, certificateManager, oneLine, expect, Skip, checks } = require("./common");
+const { urlArg, noneClient, oneLine, expect, Skip, checks } = require("./common");
 const {
-    OPCUAClient,
     MessageSecurityMode,
     SecurityPolicy,
     UserTokenType,
@@ -68,14 +67,7 @@ function sameVariant(a, b) {
 }
 
 async function main() {
-    const clientCertificateManager = certificateManager("client");
-    const client = OPCUAClient.create({
-        applicationName: "pnp-interop-node-client",
-        clientCertificateManager,
-        endpointMustExist: false,
-        securityMode: MessageSecurityMode.None,
-        securityPolicy: SecurityPolicy.None,
-        connectionStrategy: { maxRetry: 2, initialDelay: 250, maxDelay: 1000 },
+    const client = noneClient("pnp-interop-node-client", {
         requestedSessionTimeout: 30000,
         transportTimeout: 10000,
         defaultTransactionTimeout: 10000,

@@ -12,11 +12,8 @@
 //
 // usage: node tests/interop/node_subscriber.js opc.tcp://127.0.0.1:4840
 
-const { urlArg, certificateManager, expect, checks } = require("./common");
+const { urlArg, noneClient, expect, checks } = require("./common");
 const {
-    OPCUAClient,
-    MessageSecurityMode,
-    SecurityPolicy,
     AttributeIds,
     DataType,
     TimestampsToReturn,
@@ -63,13 +60,7 @@ async function created(item) {
 }
 
 async function main() {
-    const client = OPCUAClient.create({
-        applicationName: "pnp-interop-node-subscriber",
-        clientCertificateManager: certificateManager("client"),
-        endpointMustExist: false,
-        securityMode: MessageSecurityMode.None,
-        securityPolicy: SecurityPolicy.None,
-        connectionStrategy: { maxRetry: 2, initialDelay: 250, maxDelay: 1000 },
+    const client = noneClient("pnp-interop-node-subscriber", {
         requestedSessionTimeout: 30000,
         keepSessionAlive: false,
     });

@@ -83,6 +83,11 @@ Server::Server(ServerConfig config) : config_(std::move(config)) {
     transport_ = std::make_unique<transport::TcpServer>(
         config_.transport, static_cast<transport::ServiceHandler&>(*this));
     startTime_ = DateTime::now();
+    if (config_.discovery.localDiscoveryServer) {
+        auto& caps = config_.discovery.serverCapabilities;
+        if (std::find(caps.begin(), caps.end(), "LDS") == caps.end()) caps.push_back("LDS");
+        discovery_ = std::make_unique<LocalDiscovery>(config_.discovery);
+    }
     setUpServerObject();
 }
 
@@ -94,11 +99,18 @@ void Server::start() {
     transport_->setTick(kSessionCheckPeriod, [this] { expireSessions(); });
     subscriptions_->start();
     transport_->start();
+    if (discovery_) {
+        // Our own FindServersOnNetwork record needs the bound port.
+        discovery_->setSelf(
+            {config_.applicationName, endpointUrl(), config_.discovery.serverCapabilities});
+        discovery_->start();
+    }
 }
 
 void Server::stop() {
     if (transport_) transport_->stop();
     if (subscriptions_) subscriptions_->stop();
+    if (discovery_) discovery_->stop();
 }
 
 void Server::fireEvent(Event event) { subscriptions_->fireEvent(std::move(event)); }
@@ -373,6 +385,16 @@ void Server::onRequest(const std::shared_ptr<transport::ServerConnection>& conn,
             return serve(conn, in, false, &Server::activateSession);
         case DataTypeInfo<CloseSessionRequest>::binaryEncodingId:
             return serve(conn, in, false, &Server::closeSession);
+        // The LDS services exist only when the LDS is on (BadServiceUnsupported otherwise).
+        case DataTypeInfo<RegisterServerRequest>::binaryEncodingId:
+            if (discovery_) return serve(conn, in, false, &Server::registerServer);
+            [[fallthrough]];
+        case DataTypeInfo<RegisterServer2Request>::binaryEncodingId:
+            if (discovery_) return serve(conn, in, false, &Server::registerServer2);
+            [[fallthrough]];
+        case DataTypeInfo<FindServersOnNetworkRequest>::binaryEncodingId:
+            if (discovery_) return serve(conn, in, false, &Server::findServersOnNetwork);
+            [[fallthrough]];
         default: {
             // Every request starts with a RequestHeader: echo its handle in the fault.
             UInt32 handle = 0;
@@ -415,10 +437,24 @@ void Server::getEndpoints(Ctx& ctx, const GetEndpointsRequest& req, GetEndpoints
 }
 
 void Server::findServers(Ctx&, const FindServersRequest& req, FindServersResponse& resp) {
-    if (!req.serverUris.empty() && std::find(req.serverUris.begin(), req.serverUris.end(),
-                                             config_.applicationUri) == req.serverUris.end())
-        return;
-    resp.servers = {applicationDescription()};
+    if (req.serverUris.empty() || std::find(req.serverUris.begin(), req.serverUris.end(),
+                                            config_.applicationUri) != req.serverUris.end())
+        resp.servers = {applicationDescription()};
+    if (discovery_) discovery_->findServers(req, resp);
+}
+
+void Server::registerServer(Ctx&, const RegisterServerRequest& req, RegisterServerResponse& resp) {
+    discovery_->registerServer(req, resp);
+}
+
+void Server::registerServer2(Ctx&, const RegisterServer2Request& req,
+                             RegisterServer2Response& resp) {
+    discovery_->registerServer2(req, resp);
+}
+
+void Server::findServersOnNetwork(Ctx&, const FindServersOnNetworkRequest& req,
+                                  FindServersOnNetworkResponse& resp) {
+    discovery_->findServersOnNetwork(req, resp);
 }
 
 void Server::createSession(Ctx& ctx, const CreateSessionRequest& req, CreateSessionResponse& resp) {

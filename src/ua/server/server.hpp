@@ -20,6 +20,7 @@
 
 #include "ua/server/access_control.hpp"
 #include "ua/server/address_space.hpp"
+#include "ua/server/discovery.hpp"
 #include "ua/server/subscriptions.hpp"
 #include "ua/transport/tcp_server.hpp"
 #include "ua/types/ns0_types.hpp"
@@ -61,6 +62,9 @@ struct ServerConfig {
     Double maxSessionTimeoutMs = 3600000;
 
     std::shared_ptr<AccessControl> accessControl;  // default: anonymous only
+
+    // The Local Discovery Server (docs/discovery.md); off by default.
+    DiscoveryConfig discovery;
 };
 
 class Server : public transport::ServiceHandler {
@@ -91,6 +95,10 @@ class Server : public transport::ServiceHandler {
     void fireEvent(Event event);
     SubscriptionEngine& subscriptions() { return *subscriptions_; }
 
+    // The embedded Local Discovery Server: the plug-in surface for the mDNS glue (any
+    // thread). nullptr unless config.discovery.localDiscoveryServer.
+    LocalDiscovery* localDiscovery() { return discovery_.get(); }
+
     // Open sessions (any thread).
     std::size_t sessionCount() const { return sessionCount_.load(std::memory_order_relaxed); }
 
@@ -113,6 +121,10 @@ class Server : public transport::ServiceHandler {
     // Services.
     void getEndpoints(Ctx&, const GetEndpointsRequest&, GetEndpointsResponse&);
     void findServers(Ctx&, const FindServersRequest&, FindServersResponse&);
+    void registerServer(Ctx&, const RegisterServerRequest&, RegisterServerResponse&);
+    void registerServer2(Ctx&, const RegisterServer2Request&, RegisterServer2Response&);
+    void findServersOnNetwork(Ctx&, const FindServersOnNetworkRequest&,
+                              FindServersOnNetworkResponse&);
     void createSession(Ctx&, const CreateSessionRequest&, CreateSessionResponse&);
     void activateSession(Ctx&, const ActivateSessionRequest&, ActivateSessionResponse&);
     void closeSession(Ctx&, const CloseSessionRequest&, CloseSessionResponse&);
@@ -143,6 +155,7 @@ class Server : public transport::ServiceHandler {
     std::unique_ptr<AddressSpace> addressSpace_;
     std::unique_ptr<SubscriptionEngine> subscriptions_;
     std::unique_ptr<transport::TcpServer> transport_;
+    std::unique_ptr<LocalDiscovery> discovery_;  // when config_.discovery enables it
     DateTime startTime_;
     std::unordered_map<NodeId, std::unique_ptr<Session>> sessions_;  // by authentication token
     UInt32 nextSessionNumber_ = 1;
