@@ -236,9 +236,14 @@ TEST(Mdns, RecordsExpireAfterTheirTtlAndAreRefreshedBefore) {
     browser.browse();
     // A foreign responder that announces once with TTL 2 s and then goes silent.
     auto peer = udpPeer(a, kPort, "va");
-    auto t0 = Clock::now();
-    peer->sendToGroup(announcement("short", 2, {10, 77, 3, 1}), kPort);
-    auto up = browser.waitEvent("short", true, 2000ms);
+    // Sent again when not seen (a loaded machine may drop a single packet); t0 = last send.
+    Clock::time_point t0;
+    std::optional<Seen> up;
+    for (int attempt = 0; attempt < 4 && !up; ++attempt) {
+        t0 = Clock::now();
+        peer->sendToGroup(announcement("short", 2, {10, 77, 3, 1}), kPort);
+        up = browser.waitEvent("short", true, 500ms);
+    }
     ASSERT_TRUE(up);
     EXPECT_EQ(up->service.host, "short-host.local");
     EXPECT_EQ(up->service.txtValue("path"), "/short");
