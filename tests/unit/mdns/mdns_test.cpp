@@ -604,3 +604,16 @@ TEST(Mdns, SharesPort5353WithAnotherSocketAndHonoursTheInterfaceList) {
     }
     EXPECT_TRUE(heard) << "the other socket on 5353 did not get the announcement";
 }
+
+TEST(Mdns, InstanceNamesWithDotsSpacesAndUtf8SurviveTheRoundTrip) {
+    SKIP_WITHOUT_NETNS();
+    Netns a, b;
+    link(a, "va", "10.77.19.1", b, "vb", "10.77.19.2");
+    Host pub(a), browser(b);
+    browser.browse();
+    const std::string name = "Zelle \xC3\xA4 v2.1 \\ (Halle 3)";  // "Zelle ä v2.1 \ (Halle 3)"
+    pub.mdns->publish(service(name, "zelle-host"));
+    auto up = browser.waitEvent(name, true, 2000ms);
+    ASSERT_TRUE(up) << "instance name mangled";
+    EXPECT_EQ(up->service.host, "zelle-host.local");
+}
