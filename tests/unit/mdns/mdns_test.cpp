@@ -212,6 +212,9 @@ TEST(Mdns, PublishUpdateWithdrawAcrossHosts) {
     ASSERT_TRUE(up);
     // Announced at once: no probe delay (a loaded CI machine gets some slack).
     EXPECT_LT(msSince(t0, up->at), 250) << "seen after " << msSince(t0, up->at) << " ms";
+    RecordProperty("publish_to_up_us",
+                   static_cast<int>(
+                       std::chrono::duration_cast<std::chrono::microseconds>(up->at - t0).count()));
     const auto& s = up->service;
     EXPECT_EQ(s.type, kType);
     EXPECT_EQ(s.host, "robot-1-host.local");
