@@ -1077,7 +1077,7 @@ void Mdns::start() {
 void Mdns::stop() {
     {
         std::lock_guard lock(impl_->mu);
-        if (!impl_->running) return;
+        if (!impl_->running || impl_->stopping) return;  // not started, or another stop()
         impl_->stopping = true;
         impl_->wakeUp();
     }

@@ -77,7 +77,20 @@ class Netns {
     std::string name_;
 };
 
-// A veth pair with one end in each namespace, addresses a/24 and b/24, both up.
+// Waits (at most 3 s) until the link has carrier: packets sent before that are lost.
+inline bool waitLowerUp(const Netns& ns, const std::string& ifName) {
+    auto end = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+    while (std::chrono::steady_clock::now() < end) {
+        if (sh("ip -n " + ns.name() + " link show dev " + ifName + " | grep -q LOWER_UP")) {
+            return true;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return false;
+}
+
+// A veth pair with one end in each namespace, addresses a/24 and b/24, both up (with
+// carrier).
 inline void link(const Netns& nsA, const std::string& ifA, const std::string& addrA,
                  const Netns& nsB, const std::string& ifB, const std::string& addrB) {
     bool ok = sh("ip link add " + ifA + " netns " + nsA.name() + " type veth peer name " + ifB +
@@ -85,7 +98,8 @@ inline void link(const Netns& nsA, const std::string& ifA, const std::string& ad
               sh("ip -n " + nsA.name() + " addr add " + addrA + "/24 dev " + ifA) &&
               sh("ip -n " + nsB.name() + " addr add " + addrB + "/24 dev " + ifB) &&
               sh("ip -n " + nsA.name() + " link set " + ifA + " up") &&
-              sh("ip -n " + nsB.name() + " link set " + ifB + " up");
+              sh("ip -n " + nsB.name() + " link set " + ifB + " up") && waitLowerUp(nsA, ifA) &&
+              waitLowerUp(nsB, ifB);
     if (!ok) throw std::runtime_error("cannot create veth " + ifA + "/" + ifB);
 }
 
