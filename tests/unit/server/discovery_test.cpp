@@ -313,8 +313,24 @@ TEST_F(Discovery, RegisterServer2ConfigurationResults) {
     ASSERT_TRUE(regs[0].mdns);
     EXPECT_EQ(regs[0].mdns->serverCapabilities, (std::vector<String>{"DA", "LDS"}));
 
+    // An mDNS configuration beyond the bounds is refused alone; the server is registered
+    // without it (and its records go).
+    MdnsDiscoveryConfiguration tooMany;
+    tooMany.mdnsServerName = "gripper";
+    tooMany.serverCapabilities.assign(33, "DA");
+    MdnsDiscoveryConfiguration tooLong;
+    tooLong.mdnsServerName.assign(5000, 'g');
+    auto first = req.discoveryConfiguration[0];
+    req.discoveryConfiguration = {toExtensionObject(tooMany), toExtensionObject(tooLong)};
+    EXPECT_EQ(c.request(req).configurationResults,
+              (std::vector<StatusCode>{status::BadInvalidArgument, status::BadInvalidArgument}));
+    regs = lds().registeredServers();
+    ASSERT_EQ(regs.size(), 1u);
+    EXPECT_FALSE(regs[0].mdns);
+    EXPECT_EQ(onNetwork(c).servers.size(), 1u);
+
     // Too many configurations: refused as a whole.
-    req.discoveryConfiguration.assign(33, req.discoveryConfiguration[0]);
+    req.discoveryConfiguration.assign(33, first);
     EXPECT_EQ(errorOf([&] { c.request(req); }), status::BadTooManyOperations);
 }
 
