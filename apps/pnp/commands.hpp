@@ -9,9 +9,27 @@
 
 namespace pnp::cli {
 
+// Discovery (Part 12) of `pnp ua serve` and `pnp lds`.
+struct DiscoveryOptions {
+    std::string publicHost;                   // host in endpoint URLs (default: --host or hostname)
+    std::string applicationUri;               // default urn:pnp:<public host>:<port>
+    std::string name;                         // ApplicationName and mDNS instance
+    std::string lds;                          // register with this LDS-ME only
+    bool noRegister = false;                  // do not register anywhere
+    bool ldsMe = false;                       // serve: also be an LDS-ME (a workstation)
+    std::string group;                        // discovery group (TXT dg=)
+    int level = -1;                           // LDS-ME level (lds: 0, serve --lds-me: 1)
+    std::vector<std::string> mdnsInterfaces;  // default: by the listen address
+    int mdnsPort = 5353;
+    int mdnsTtl = 2;               // s, of our announcements
+    int expiryMs = 2000;           // LDS-ME: registration expiry
+    int registerIntervalMs = 500;  // re-registration period
+};
+
 struct ServeOptions {
     std::uint16_t port = 4840;
     std::string host = "0.0.0.0";
+    DiscoveryOptions discovery;
     std::vector<std::string> users;  // NAME:PASSWORD
     bool noAnonymous = false;
     std::vector<std::string> nodesets;   // NodeSet2 XML files loaded at start (with their deps)
@@ -65,7 +83,21 @@ struct EventsOptions {
     int durationMs = 0;
 };
 
+// `pnp discover`: servers on the network, live.
+struct DiscoverOptions {
+    bool json = false;
+    int durationMs = 0;            // 0: until Ctrl-C
+    bool once = false;             // print the list after --duration (default 2 s) and exit
+    std::vector<std::string> lds;  // LDS-MEs polled in addition to mDNS
+    bool noDetails = false;
+    std::vector<std::string> mdnsInterfaces;
+    int mdnsPort = 5353;
+    int pollMs = 250;
+};
+
 int runServe(const ServeOptions& options);
+int runLds(std::uint16_t port, const std::string& host, const DiscoveryOptions& options);
+int runDiscover(const DiscoverOptions& options);
 int runEndpoints(const ClientOptions& client);
 int runBrowse(const ClientOptions& client, const BrowseOptions& options);
 int runRead(const ClientOptions& client, const ReadOptions& options);

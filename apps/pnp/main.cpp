@@ -31,6 +31,43 @@ void addClientOptions(CLI::App* cmd, ClientOptions& o) {
     cmd->add_option("--user", o.user, "user name identity NAME:PASSWORD (default: anonymous)");
 }
 
+void addDiscoveryOptions(CLI::App* cmd, DiscoveryOptions& o, bool lds) {
+    cmd->add_option("--public-host", o.publicHost,
+                    "host name or address put into endpoint URLs (default: --host, or the "
+                    "host name)");
+    cmd->add_option("--application-uri", o.applicationUri,
+                    "ApplicationUri (default urn:pnp:<public host>:<port>)");
+    cmd->add_option("--name", o.name, "ApplicationName, also the mDNS instance name");
+    cmd->add_option("--lds", o.lds,
+                    lds ? "register with this (higher) LDS-ME" : "register with this LDS-ME only");
+    if (!lds) {
+        cmd->add_flag("--no-register", o.noRegister, "do not register with any LDS-ME");
+        cmd->add_flag("--lds-me", o.ldsMe,
+                      "also be an LDS-ME (a workstation: its devices register here)");
+    }
+    cmd->add_option("--discovery-group", o.group,
+                    "discovery group: register only with LDS-MEs of this group (TXT dg=)");
+    cmd->add_option("--discovery-level", o.level,
+                    "LDS-ME level (0 = cell bus; default 0 for `pnp lds`, 1 for --lds-me)")
+        ->check(CLI::Range(0, 100));
+    cmd->add_option("--mdns-interface", o.mdnsInterfaces,
+                    "mDNS on this interface (repeatable; default: every multicast interface "
+                    "for --host 0.0.0.0, the address's interface otherwise)");
+    cmd->add_option("--mdns-port", o.mdnsPort, "mDNS UDP port (5353; tests use another)")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 65535));
+    cmd->add_option("--mdns-ttl", o.mdnsTtl, "TTL of our mDNS records, s")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 4500));
+    cmd->add_option("--registration-expiry", o.expiryMs,
+                    "LDS-ME: drop a registration not renewed within MS ms")
+        ->capture_default_str()
+        ->check(CLI::Range(100, 3600000));
+    cmd->add_option("--register-interval", o.registerIntervalMs, "re-register every MS ms")
+        ->capture_default_str()
+        ->check(CLI::Range(10, 3600000));
+}
+
 int uaError(const pnp::ua::client::Error& e, bool json) {
     std::cerr << "error: " << e.what() << "\n";
     if (json) {
@@ -52,6 +89,38 @@ int main(int argc, char** argv) {
     app.require_subcommand(1);
     app.set_version_flag("--version", "pnp 0.1.0");
     app.footer("Run `pnp ua --help` for the OPC UA tools.");
+
+    std::uint16_t ldsPort = 4840;
+    std::string ldsHost = "0.0.0.0";
+    DiscoveryOptions ldsOpts;
+    CLI::App* lds =
+        app.add_subcommand("lds", "run a Local Discovery Server with multicast extension (LDS-ME)");
+    lds->add_option("--port", ldsPort, "TCP port (0: any free port)")->capture_default_str();
+    lds->add_option("--host", ldsHost, "address to listen on")->capture_default_str();
+    addDiscoveryOptions(lds, ldsOpts, true);
+    lds->footer(
+        "Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM.\n"
+        "Servers register with RegisterServer2 and are announced by mDNS until they "
+        "unregister or their registration expires.");
+
+    DiscoverOptions discoverOpts;
+    CLI::App* discover = app.add_subcommand(
+        "discover", "list OPC UA servers on the network as they come and go (mDNS + LDS-MEs)");
+    discover->add_flag("--json", discoverOpts.json, "one JSON object per line (--once: a list)");
+    discover->add_option("--duration", discoverOpts.durationMs, "stop after MS ms (0: Ctrl-C)");
+    discover->add_flag("--once", discoverOpts.once,
+                       "print the servers found within --duration (default 2000) and exit");
+    discover->add_option("--lds", discoverOpts.lds, "also poll this LDS-ME (repeatable)");
+    discover->add_flag("--no-details", discoverOpts.noDetails,
+                       "do not ask each server for its description and endpoints");
+    discover->add_option("--mdns-interface", discoverOpts.mdnsInterfaces,
+                         "mDNS on this interface (repeatable; default all)");
+    discover->add_option("--mdns-port", discoverOpts.mdnsPort, "mDNS UDP port")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 65535));
+    discover->add_option("--poll", discoverOpts.pollMs, "LDS-ME polling period, ms")
+        ->capture_default_str()
+        ->check(CLI::Range(10, 600000));
 
     CLI::App* ua =
         app.add_subcommand("ua", "OPC UA tools: a demo server and a command-line client");
@@ -80,7 +149,11 @@ int main(int argc, char** argv) {
                       "TYPE=NAME: instantiate ObjectType/VariableType TYPE (e.g. "
                       "\"nsu=http://opcfoundation.org/UA/Robotics/;i=1002\") as NAME below "
                       "Objects, node id ns=1;s=NAME (repeatable)");
-    serve->footer("Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM.");
+    addDiscoveryOptions(serve, serveOpts.discovery, false);
+    serve->footer(
+        "Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM.\n"
+        "Registers with an LDS-ME (found by mDNS, or --lds URL) unless --no-register; "
+        "see docs/discovery.md.");
 
     ClientOptions epOpts;
     CLI::App* endpoints =
@@ -166,11 +239,14 @@ int main(int argc, char** argv) {
         return rc == 0 ? kExitOk : kExitUsage;
     }
 
-    const bool json = (*endpoints && epOpts.json) || (*browse && brOpts.json) ||
-                      (*read && rdOpts.json) || (*write && wrOpts.json) || (*call && clOpts.json) ||
+    const bool json = (*discover && discoverOpts.json) || (*endpoints && epOpts.json) ||
+                      (*browse && brOpts.json) || (*read && rdOpts.json) ||
+                      (*write && wrOpts.json) || (*call && clOpts.json) ||
                       (*monitor && moOpts.json) || (*events && evOpts.json);
     try {
         if (*serve) return runServe(serveOpts);
+        if (*lds) return runLds(ldsPort, ldsHost, ldsOpts);
+        if (*discover) return runDiscover(discoverOpts);
         if (*endpoints) return runEndpoints(epOpts);
         if (*browse) return runBrowse(brOpts, browseOpts);
         if (*read) return runRead(rdOpts, readOpts);

@@ -11,6 +11,7 @@
 #include <memory>
 
 #include "commands.hpp"
+#include "discovery_commands.hpp"
 #include "output.hpp"
 #include "ua/demo/demo.hpp"
 #include "ua/server/nodeset_xml.hpp"
@@ -79,7 +80,7 @@ int runServe(const ServeOptions& o) {
     server::ServerConfig config;
     config.host = o.host;
     config.port = o.port;
-    if (o.host != "0.0.0.0" && o.host != "::" && !o.host.empty()) config.publicHost = o.host;
+    applyDiscoveryConfig(config, o.discovery, false);
     config.accessControl =
         std::make_shared<server::DefaultAccessControl>(!o.noAnonymous, std::move(users));
 
@@ -101,16 +102,25 @@ int runServe(const ServeOptions& o) {
         return kExitUaError;
     }
     std::cout << "listening on " << server.endpointUrl() << std::endl;  // flushed
+    std::unique_ptr<DiscoveryRuntime> discovery;
+    try {
+        discovery = std::make_unique<DiscoveryRuntime>(server, o.discovery);
+    } catch (const std::exception& e) {
+        std::cerr << "error: discovery: " << e.what() << "\n";
+        server.stop();
+        return kExitUaError;
+    }
     std::cerr << "pnp ua serve: namespace " << demo::kNamespaceUri
               << " is ns=" << demoNamespace.namespaceIndex() << "; anonymous "
-              << (o.noAnonymous ? "refused" : "allowed") << "; " << o.users.size()
-              << " user(s); stop with Ctrl-C or SIGTERM" << std::endl;
+              << (o.noAnonymous ? "refused" : "allowed") << "; " << o.users.size() << " user(s); "
+              << discovery->status() << "; stop with Ctrl-C or SIGTERM" << std::endl;
 
     int sig = 0;
     while (sigwait(&stopSignals, &sig) != 0) {
     }
     std::cerr << "pnp ua serve: " << (sig == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping"
               << std::endl;
+    discovery.reset();  // unregisters first: the server disappears everywhere at once
     server.stop();
     return kExitOk;
 }

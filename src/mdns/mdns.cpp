@@ -24,6 +24,7 @@
 #include <system_error>
 #include <thread>
 #include <tuple>
+#include <utility>
 
 #include "mdns/dns_message.hpp"
 
@@ -132,6 +133,7 @@ struct Browse {
     std::function<void(const DiscoveredService&, bool)> callback;
     TimePoint nextQuery{};
     milliseconds interval{1000};
+    bool asked = false;  // the first query went out (it asks for unicast answers)
     std::map<std::string, DiscoveredService> reported;  // key: ifIndex|instance name
 };
 
@@ -430,6 +432,7 @@ struct Mdns::Impl {
             for (auto& [id, b] : browses) {
                 b.nextQuery = now;
                 b.interval = milliseconds(1000);
+                b.asked = false;
             }
         }
     }
@@ -830,11 +833,17 @@ struct Mdns::Impl {
     }
 
     void tickQueries(TimePoint now) {
+        // A browse's first query and queryNow() set the QU bit (RFC 6762 §5.4: the first
+        // query after start-up should): responders answer those at once by unicast, instead
+        // of after the 20-120 ms delay of multicast answers to shared records — that delay
+        // would be most of a Plug & Produce device's time to find its LDS-ME.
         std::set<std::string> types = std::move(oneShotQueries);
+        std::set<std::string> unicastTypes = types;
         oneShotQueries.clear();
         for (auto& [id, b] : browses) {
             if (now >= b.nextQuery) {
                 types.insert(b.typeName);
+                if (!std::exchange(b.asked, true)) unicastTypes.insert(b.typeName);
                 b.nextQuery = now + b.interval;
                 b.interval = std::min<milliseconds>(b.interval * 2, kMaxQueryInterval);
             }
@@ -844,7 +853,7 @@ struct Mdns::Impl {
         std::map<int, std::vector<ResourceRecord>> known;
         for (const auto& t : types) {
             for (const auto& i : ifaces) {
-                questions[i.index].push_back({t, rrtype::PTR, kClassIn, false});
+                questions[i.index].push_back({t, rrtype::PTR, kClassIn, unicastTypes.count(t) > 0});
                 for (const auto& e : cache) {
                     if (e.ifIndex != i.index || e.rr.type != rrtype::PTR || e.goodbye ||
                         !namesEqual(e.rr.name, t)) {
@@ -1069,6 +1078,7 @@ void Mdns::start() {
     for (auto& [id, b] : impl_->browses) {
         b.nextQuery = Clock::now();
         b.interval = milliseconds(1000);
+        b.asked = false;
     }
     impl_->running = true;
     impl_->thread = std::thread([this] { impl_->run(); });

@@ -7,7 +7,7 @@
 # --instance (node_server.js loads no Robotics model: node_client.js skips those checks).
 set -euo pipefail
 usage() {
-    echo "usage: $0 ua serve --port PORT [--user NAME:PASSWORD | --nodeset FILE | --instance SPEC]..." >&2
+    echo "usage: $0 ua serve --port PORT [--no-register] [--user NAME:PASSWORD | --nodeset FILE | --instance SPEC]..." >&2
     exit 2
 }
 if [[ $# -lt 4 || "$1" != "ua" || "$2" != "serve" || "$3" != "--port" ]]; then
@@ -15,6 +15,10 @@ if [[ $# -lt 4 || "$1" != "ua" || "$2" != "serve" || "$3" != "--port" ]]; then
 fi
 rest=("${@:5}")
 while ((${#rest[@]} > 0)); do
+    if [[ "${rest[0]}" == "--no-register" ]]; then  # node_server.js registers nowhere anyway
+        rest=("${rest[@]:1}")
+        continue
+    fi
     [[ "${rest[0]}" =~ ^--(user|nodeset|instance)$ && ${#rest[@]} -ge 2 ]] || usage
     rest=("${rest[@]:2}")
 done

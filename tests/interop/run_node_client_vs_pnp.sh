@@ -53,7 +53,8 @@ trap 'exit 143' TERM
 
 # A Robotics (OPC 40010-1) model loaded from NodeSet2 XML, with two instances (node_client.js
 # browses and reads them).
-SERVE_ARGS=(ua serve --port "$PORT" --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}")
+# --no-register: tests talk to loopback only (no mDNS on the machine's network).
+SERVE_ARGS=(ua serve --port "$PORT" --no-register --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}")
 ilog "starting: $PNP_BINARY ${SERVE_ARGS[*]} (log: $SERVER_LOG)"
 "$PNP_BINARY" "${SERVE_ARGS[@]}" >"$SERVER_LOG" 2>&1 </dev/null &
 SERVER_PID=$!

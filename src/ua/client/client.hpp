@@ -181,6 +181,10 @@ class Client {
                                                   Deadline deadline = {});
     std::vector<ApplicationDescription> findServers(std::string_view url = {},
                                                     Deadline deadline = {});
+    // Any discovery service (FindServersOnNetwork, RegisterServer2, ...) the same way: on
+    // the current channel, or without a session on a temporary connection to url.
+    template <class Req, class Resp = ResponseOf<Req>>
+    Resp discoveryRequest(std::string_view url, Req req, Deadline deadline = {});
 
     // ---- view -------------------------------------------------------------------------
     // One Browse; the result may carry a continuation point (see browseNext()).
@@ -324,6 +328,13 @@ Resp Client::decodeIncoming(const transport::IncomingResponse& r, std::string_vi
     if (r.status.isBad()) throw Error(r.status, std::string(service) + ": response aborted");
     return detail::decodeResponse<Resp>(r.typeId, r.body.data(), r.body.size(), service, limits,
                                         r.body.block());
+}
+
+template <class Req, class Resp>
+Resp Client::discoveryRequest(std::string_view url, Req req, Deadline deadline) {
+    constexpr std::string_view service = detail::serviceName<Req>();
+    auto r = discoveryRoundTrip(url, encoderFor(req), deadline, service);
+    return decodeIncoming<Resp>(r, service, decodeLimits());
 }
 
 template <class Req, class Resp>

@@ -14,7 +14,7 @@
 #include <limits>
 #include <thread>
 
-#include "child_process.hpp"
+#include "support/child_process.hpp"
 #include "support/loopback.hpp"
 #include "ua/client/browse_path.hpp"
 #include "ua/client/client.hpp"

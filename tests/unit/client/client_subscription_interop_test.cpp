@@ -16,7 +16,7 @@
 #include <set>
 #include <thread>
 
-#include "child_process.hpp"
+#include "support/child_process.hpp"
 #include "support/loopback.hpp"
 #include "support/tcp_relay.hpp"
 #include "ua/client/client.hpp"

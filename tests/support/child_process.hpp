@@ -105,6 +105,25 @@ class ChildProcess {
     // Reads stdout until a line equal to `line` arrives, the child exits or the timeout.
     bool waitForLine(const std::string& line, std::chrono::milliseconds timeout,
                      std::string& error) {
+        return waitForLineWith(line, false, timeout, error, nullptr);
+    }
+    // The same for a line starting with `prefix`; the whole line goes to *found.
+    bool waitForPrefix(const std::string& prefix, std::chrono::milliseconds timeout,
+                       std::string& error, std::string* found = nullptr) {
+        return waitForLineWith(prefix, true, timeout, error, found);
+    }
+
+    // SIGKILL (a crash: no goodbye, no unregistration) and reap.
+    void kill9() {
+        if (pid_ <= 0) return;
+        ::kill(pid_, SIGKILL);
+        ::waitpid(pid_, nullptr, 0);
+        pid_ = -1;
+    }
+
+  private:
+    bool waitForLineWith(const std::string& line, bool prefix, std::chrono::milliseconds timeout,
+                         std::string& error, std::string* found) {
         auto end = std::chrono::steady_clock::now() + timeout;
         std::string buf;
         for (;;) {
@@ -113,7 +132,10 @@ class ChildProcess {
                 std::string l = buf.substr(0, nl);
                 buf.erase(0, nl + 1);
                 if (!l.empty() && l.back() == '\r') l.pop_back();
-                if (l == line) return true;
+                if (prefix ? l.rfind(line, 0) == 0 : l == line) {
+                    if (found) *found = l;
+                    return true;
+                }
             }
             auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
                 end - std::chrono::steady_clock::now());
@@ -135,6 +157,7 @@ class ChildProcess {
         }
     }
 
+  public:
     // SIGTERM, up to `grace` to exit, then SIGKILL. Idempotent.
     void stop(std::chrono::milliseconds grace = std::chrono::milliseconds(5000)) {
         if (pid_ > 0) {

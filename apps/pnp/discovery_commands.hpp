@@ -1,0 +1,39 @@
+// Discovery parts of the CLI (docs/discovery.md): the config a discovery-enabled server gets
+// from the command line, and what runs beside it (mDNS, LDS-ME glue, registration).
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "commands.hpp"
+#include "mdns/mdns.hpp"
+#include "ua/discovery/lds_me.hpp"
+#include "ua/discovery/registrar.hpp"
+#include "ua/server/server.hpp"
+
+namespace pnp::cli {
+
+// ApplicationUri (unique per server: urn:pnp:<public host>:<port>), public host, name and
+// the LDS settings. lds: the server is an LDS-ME (`pnp lds`).
+void applyDiscoveryConfig(ua::server::ServerConfig& config, const DiscoveryOptions& options,
+                          bool lds);
+
+// Started after server.start(); the destructor unregisters, sends goodbyes and stops mDNS.
+// mDNS runs on the interfaces the server is reachable on (all for 0.0.0.0, the address's
+// interface otherwise, none for loopback) unless --mdns-interface names them.
+class DiscoveryRuntime {
+  public:
+    DiscoveryRuntime(ua::server::Server& server, const DiscoveryOptions& options);
+    ~DiscoveryRuntime();
+    DiscoveryRuntime(const DiscoveryRuntime&) = delete;
+    DiscoveryRuntime& operator=(const DiscoveryRuntime&) = delete;
+    const std::string& status() const { return status_; }
+
+  private:
+    std::unique_ptr<mdns::Mdns> mdns_;
+    std::unique_ptr<ua::discovery::LdsMe> ldsMe_;
+    std::unique_ptr<ua::discovery::Registrar> registrar_;
+    std::string status_;
+};
+
+}  // namespace pnp::cli
