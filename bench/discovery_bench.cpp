@@ -5,8 +5,11 @@
 // round-trip floor). Server and client run in this process.
 //
 // usage: pnp_bench_discovery [--servers N] [--runs R]
+#include <malloc.h>
+
 #include <algorithm>
 #include <chrono>
+#include <fstream>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -39,6 +42,16 @@ Stats measure(int runs, F&& f) {
     return {us[us.size() / 2], us[std::min(us.size() - 1, us.size() * 99 / 100)]};
 }
 
+// VmRSS of this process, kB.
+long rssKb() {
+    std::ifstream f("/proc/self/status");
+    std::string line;
+    while (std::getline(f, line))
+        if (line.rfind("VmRSS:", 0) == 0) return std::atol(line.c_str() + 6);
+    return -1;
+}
+std::size_t heapBytes() { return mallinfo2().uordblks; }
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -62,6 +75,8 @@ int main(int argc, char** argv) {
     client::Client c;
     c.connect("opc.tcp://127.0.0.1:" + std::to_string(server.port()));
 
+    const long rssBefore = rssKb();
+    const std::size_t heapBefore = heapBytes();
     for (int i = 0; i < servers; ++i) {
         std::string id = std::to_string(i);
         RegisterServer2Request r;
@@ -77,6 +92,9 @@ int main(int argc, char** argv) {
         r.discoveryConfiguration = {toExtensionObject(m)};
         c.request(std::move(r));
     }
+
+    const long rssAfter = rssKb();
+    const std::size_t heapAfter = heapBytes();
 
     ReadRequest read;
     read.nodesToRead.resize(1);
@@ -104,6 +122,11 @@ int main(int argc, char** argv) {
     row("FindServersOnNetwork (all)", fson);
     row("FindServers (all)", fs);
     row("FindServersOnNetwork (filter NA)", ff);
+    std::printf("memory of the %d registrations (server and client in this process): heap "
+                "+%.1f KiB (%.0f B each), VmRSS %ld -> %ld kB\n",
+                servers, static_cast<double>(heapAfter - heapBefore) / 1024.0,
+                servers ? static_cast<double>(heapAfter - heapBefore) / servers : 0.0, rssBefore,
+                rssAfter);
     c.disconnect();
     server.stop();
     return 0;

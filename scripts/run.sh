@@ -1,12 +1,20 @@
 #!/usr/bin/env bash
-# The "main job": set up, build (release) and run the server in the foreground.
-#   scripts/run.sh [extra args for `pnp ua serve`]
-#   PNP_PORT=4840 (default)
-# (Later this starts the simulated cell.)
+# The "main job": set up, build (release) and run the simulated cell in the foreground
+# (scripts/sim_cell.sh: an LDS-ME on the cell bus, two workstations, four devices in network
+# namespaces, `pnp discover` showing them come and go) until Ctrl-C.
+#   scripts/run.sh            the simulated cell (root: network namespaces)
+#   scripts/run.sh --server [extra args for `pnp ua serve`]
+#                             only the demo server on port $PNP_PORT (default 4840)
+#   PNP_SIM_SECONDS=N         stop the cell after N s (default: run until Ctrl-C)
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$ROOT/scripts/setup.sh"
 bash "$ROOT/scripts/build.sh" release
+PNP="$ROOT/build/apps/pnp/pnp"
+if [[ "${1:-}" != "--server" ]] && [[ $(id -u) -eq 0 ]] && ip netns list >/dev/null 2>&1; then
+    exec bash "$ROOT/scripts/sim_cell.sh" "$PNP"
+fi
+[[ "${1:-}" == "--server" ]] && shift
 PORT="${PNP_PORT:-4840}"
-echo "[run] $ROOT/build/apps/pnp/pnp ua serve --port $PORT $*"
-exec "$ROOT/build/apps/pnp/pnp" ua serve --port "$PORT" "$@"
+echo "[run] $PNP ua serve --port $PORT $*"
+exec "$PNP" ua serve --port "$PORT" "$@"
