@@ -90,6 +90,7 @@ struct DiscoverOptions {
     bool once = false;             // print the list after --duration (default 2 s) and exit
     std::vector<std::string> lds;  // LDS-MEs polled in addition to mDNS
     bool noDetails = false;
+    bool noMdns = false;  // poll the --lds LDS-MEs only
     std::vector<std::string> mdnsInterfaces;
     int mdnsPort = 5353;
     int pollMs = 250;

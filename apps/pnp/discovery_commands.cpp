@@ -229,9 +229,12 @@ int runDiscover(const DiscoverOptions& o) {
     pthread_sigmask(SIG_BLOCK, &stopSignals, nullptr);
 
     std::unique_ptr<mdns::Mdns> mdns;
+    if (o.noMdns && o.lds.empty()) throw UsageError("--no-mdns needs at least one --lds URL");
     try {
-        mdns = std::make_unique<mdns::Mdns>(mdnsConfig(o.mdnsInterfaces, o.mdnsPort, 120));
-        mdns->start();
+        if (!o.noMdns) {
+            mdns = std::make_unique<mdns::Mdns>(mdnsConfig(o.mdnsInterfaces, o.mdnsPort, 120));
+            mdns->start();
+        }
     } catch (const std::exception& e) {
         if (o.lds.empty()) {
             std::cerr << "error: mDNS: " << e.what() << "\n";

@@ -113,6 +113,8 @@ int main(int argc, char** argv) {
     discover->add_option("--lds", discoverOpts.lds, "also poll this LDS-ME (repeatable)");
     discover->add_flag("--no-details", discoverOpts.noDetails,
                        "do not ask each server for its description and endpoints");
+    discover->add_flag("--no-mdns", discoverOpts.noMdns,
+                       "no multicast: only poll the --lds LDS-MEs (and those they list)");
     discover->add_option("--mdns-interface", discoverOpts.mdnsInterfaces,
                          "mDNS on this interface (repeatable; default all)");
     discover->add_option("--mdns-port", discoverOpts.mdnsPort, "mDNS UDP port")

@@ -703,4 +703,58 @@ TEST(CliServe, PortInUseIsAnError) {
     EXPECT_EQ(first.terminate(), 0);
 }
 
+// ---- discovery: pnp lds, pnp ua serve --lds, pnp discover (loopback: no multicast) -------
+TEST(CliDiscovery, ServerRegistersWithTheLdsAndDiscoverListsItUntilItStops) {
+    const int ldsPort = freePort();
+    Child lds(withBinary({"lds", "--host", "127.0.0.1", "--port", std::to_string(ldsPort)}));
+    ASSERT_TRUE(lds.waitForLine("listening on", milliseconds(10000))) << lds.err;
+    const std::string ldsUrl = "opc.tcp://127.0.0.1:" + std::to_string(ldsPort);
+    const int port = freePort();
+    auto server = std::make_unique<Child>(
+        withBinary({"ua", "serve", "--host", "127.0.0.1", "--port", std::to_string(port), "--lds",
+                    ldsUrl, "--name", "robot-7"}));
+    ASSERT_TRUE(server->waitForLine("listening on", milliseconds(10000))) << server->err;
+    const std::string url = "opc.tcp://127.0.0.1:" + std::to_string(port);
+
+    auto find = [&](const json& list) -> const json* {
+        for (const auto& s : list)
+            if (s.value("url", "") == url) return &s;
+        return nullptr;
+    };
+    json list;
+    const json* robot = nullptr;
+    for (int i = 0; i < 10 && !robot; ++i) {  // bounded: registration within ~1 s
+        auto r = run(
+            {"discover", "--once", "--json", "--no-mdns", "--lds", ldsUrl, "--duration", "600"});
+        ASSERT_EQ(r.exitCode, 0) << describe(r);
+        list = parseJson(r);
+        robot = find(list);
+    }
+    ASSERT_TRUE(robot) << list.dump(2);
+    EXPECT_EQ(robot->value("name", ""), "robot-7");
+    EXPECT_EQ(robot->value("applicationUri", ""), "urn:pnp:127.0.0.1:" + std::to_string(port));
+    EXPECT_GE(robot->at("endpoints").size(), 1u);
+    bool ldsListed = false;  // the LDS lists itself, with the LDS capability
+    for (const auto& s : list)
+        if (s.value("url", "") == ldsUrl)
+            for (const auto& c : s.at("capabilities")) ldsListed |= c == "LDS";
+    EXPECT_TRUE(ldsListed) << list.dump(2);
+
+    // A graceful stop unregisters at once.
+    server->terminate();
+    server.reset();
+    auto r =
+        run({"discover", "--once", "--json", "--no-mdns", "--lds", ldsUrl, "--duration", "600"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    EXPECT_EQ(find(parseJson(r)), nullptr) << r.out;
+    lds.terminate();
+}
+
+TEST(CliDiscovery, UsageErrors) {
+    EXPECT_EQ(run({"discover", "--no-mdns"}).exitCode, 2);
+    EXPECT_EQ(run({"discover", "--poll", "1"}).exitCode, 2);
+    EXPECT_EQ(run({"lds", "--discovery-level", "101"}).exitCode, 2);
+    EXPECT_EQ(run({"ua", "serve", "--register-interval", "0"}).exitCode, 2);
+}
+
 }  // namespace
