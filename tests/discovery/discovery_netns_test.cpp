@@ -272,8 +272,10 @@ TEST_F(DiscoveryNetns, DeviceStartToVisibleOnTheCellBus) {
         "[ figures  ]   of which process start -> \"listening on\" read by the test: "
         "median %.1f ms\n",
         median(listening));
+#ifndef PNP_SANITIZED_BUILD
     EXPECT_LT(median(ms), 50.0);
     EXPECT_LT(percentile(ms, 0.95), 150.0);
+#endif
 }
 
 TEST_F(DiscoveryNetns, UnpluggedDevicesDisappear) {
