@@ -750,6 +750,41 @@ TEST(CliDiscovery, ServerRegistersWithTheLdsAndDiscoverListsItUntilItStops) {
     lds.terminate();
 }
 
+TEST(CliDiscovery, ARestartedLdsGetsTheRegistrationBackWithinAnInterval) {
+    const int ldsPort = freePort();
+    const std::vector<std::string> ldsArgs{"lds", "--host", "127.0.0.1", "--port",
+                                           std::to_string(ldsPort)};
+    auto lds = std::make_unique<Child>(withBinary(ldsArgs));
+    ASSERT_TRUE(lds->waitForLine("listening on", milliseconds(10000))) << lds->err;
+    const std::string ldsUrl = "opc.tcp://127.0.0.1:" + std::to_string(ldsPort);
+    const int port = freePort();
+    Child server(withBinary({"ua", "serve", "--host", "127.0.0.1", "--port", std::to_string(port),
+                             "--lds", ldsUrl, "--register-interval", "300"}));
+    ASSERT_TRUE(server.waitForLine("listening on", milliseconds(10000))) << server.err;
+    const std::string url = "opc.tcp://127.0.0.1:" + std::to_string(port);
+    auto listed = [&] {
+        auto r = run({"discover", "--once", "--json", "--no-mdns", "--no-details", "--lds", ldsUrl,
+                      "--duration", "400"});
+        if (r.exitCode != 0) return false;
+        for (const auto& s : parseJson(r))
+            if (s.value("url", "") == url) return true;
+        return false;
+    };
+    bool before = false;
+    for (int i = 0; i < 10 && !before; ++i) before = listed();
+    ASSERT_TRUE(before);
+    lds->terminate();  // the LDS restarts: it knows nothing
+    lds = std::make_unique<Child>(withBinary(ldsArgs));
+    ASSERT_TRUE(lds->waitForLine("listening on", milliseconds(10000))) << lds->err;
+    const auto t0 = Clock::now();
+    bool after = false;
+    for (int i = 0; i < 10 && !after; ++i) after = listed();
+    EXPECT_TRUE(after) << "not registered again";
+    EXPECT_LT(Clock::now() - t0, milliseconds(3000));
+    server.terminate();
+    lds->terminate();
+}
+
 TEST(CliDiscovery, UsageErrors) {
     EXPECT_EQ(run({"discover", "--no-mdns"}).exitCode, 2);
     EXPECT_EQ(run({"discover", "--poll", "1"}).exitCode, 2);
