@@ -125,10 +125,7 @@ DiscoveryRuntime::DiscoveryRuntime(ua::server::Server& server, const DiscoveryOp
         rc.interval = std::chrono::milliseconds(o.registerIntervalMs);
         registrar_ = std::make_unique<ua::discovery::Registrar>(server, mdns_.get(), rc);
         registrar_->onLdsChanged([](const std::string& url) {
-            if (url.empty())
-                std::cerr << "pnp: no LDS-ME to register with" << std::endl;
-            else
-                std::cerr << "pnp: registered with the LDS-ME " << url << std::endl;
+            std::cerr << "pnp: registered with the LDS-ME " << url << std::endl;
         });
         registrar_->start();
     }

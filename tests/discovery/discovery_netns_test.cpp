@@ -86,7 +86,7 @@ class Cell {
         std::string error;
         const std::string log =
             "/tmp/pnp_discovery_" + std::to_string(::getpid()) + "_" + host + ".log";
-        if (!p->start(lab_.inHost(host, args), log, error)) throw std::runtime_error(error);
+        if (!p->start(args, log, error, lab_.host(host))) throw std::runtime_error(error);
         if (!p->waitForPrefix("listening on ", 10s, error))
             throw std::runtime_error(host + ": " + error + "\n" + p->logTail());
         return *p;

@@ -8,6 +8,7 @@
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <poll.h>
+#include <sched.h>
 #include <signal.h>
 #include <sys/prctl.h>
 #include <sys/socket.h>
@@ -65,9 +66,17 @@ class ChildProcess {
     ChildProcess& operator=(const ChildProcess&) = delete;
     ~ChildProcess() { stop(); }
 
-    // Starts argv[0] (a full path) with argv; stderr goes to logPath.
-    bool start(const std::vector<std::string>& argv, const std::string& logPath,
-               std::string& error) {
+    // Starts argv[0] (a full path) with argv; stderr goes to logPath. With netns, the child
+    // enters that network namespace (/var/run/netns/NAME, as `ip netns exec` would, but
+    // without its extra exec and mount namespace) before it executes argv.
+    bool start(const std::vector<std::string>& argv, const std::string& logPath, std::string& error,
+               const std::string& netns = {}) {
+        // Everything the child needs is prepared here: between fork and exec it may only make
+        // async-signal-safe calls (another thread of the test may hold the malloc lock).
+        std::vector<char*> args;
+        for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+        args.push_back(nullptr);
+        const std::string nsPath = netns.empty() ? std::string() : "/var/run/netns/" + netns;
         int fds[2];
         if (::pipe2(fds, O_CLOEXEC) != 0) {
             error = "pipe failed";
@@ -86,14 +95,15 @@ class ChildProcess {
             // Child: only async-signal-safe calls until exec.
             ::prctl(PR_SET_PDEATHSIG, SIGTERM);
             if (::getppid() != parent) ::_exit(127);
+            if (!nsPath.empty()) {
+                int ns = ::open(nsPath.c_str(), O_RDONLY | O_CLOEXEC);
+                if (ns < 0 || ::setns(ns, CLONE_NEWNET) != 0) ::_exit(126);
+            }
             ::dup2(fds[1], STDOUT_FILENO);
             int log = ::open(logPath.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
             if (log >= 0) ::dup2(log, STDERR_FILENO);
             int devnull = ::open("/dev/null", O_RDONLY);
             if (devnull >= 0) ::dup2(devnull, STDIN_FILENO);
-            std::vector<char*> args;
-            for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-            args.push_back(nullptr);
             ::execv(args[0], args.data());
             ::_exit(127);
         }

@@ -133,6 +133,9 @@ void Registrar::run(std::stop_token stop) {
             if (changed_) {
                 changed_ = false;
                 target = choose();
+                // No candidate announced (a lost refresh, an interface that went down): keep
+                // the current LDS-ME and keep trying it, rather than unregister and flap.
+                if (target.empty()) target = current_;
                 if (target != current_) {
                     previous = registeredWith_;
                     current_ = target;
@@ -143,13 +146,8 @@ void Registrar::run(std::stop_token stop) {
         }
         if (!previous.empty() && previous != target) {
             registerWith(previous, false);  // moved: leave the old one at once
-            std::function<void(const std::string&)> cb;
-            {
-                std::lock_guard lock(mutex_);
-                registeredWith_.clear();
-                cb = onLdsChanged_;
-            }
-            if (cb && target.empty()) cb("");
+            std::lock_guard lock(mutex_);
+            registeredWith_.clear();
         }
         if (!target.empty() && Clock::now() >= due) {
             const bool ok = registerWith(target, true);

@@ -12,7 +12,9 @@
 //      segment picks the workstation over the cell bus), then the lowest instance name,
 //      then the lowest URL.
 // The rule depends only on what is announced, never on start order; it is evaluated again
-// whenever an announcement comes or goes, and a registration moves to the new choice.
+// whenever an announcement comes or goes, and a registration moves to a new choice. When no
+// candidate is announced any more, the registrar stays with the current LDS-ME and keeps
+// trying it (an mDNS record can lapse while the LDS-ME is still reachable).
 #pragma once
 
 #include <chrono>
@@ -62,8 +64,8 @@ class Registrar {
 
     std::string currentLds() const;       // "" while none is chosen
     std::uint64_t registrations() const;  // successful RegisterServer2 calls
-    // Called (on the registrar's thread) after each successful registration with a new
-    // LDS-ME and after losing one (""), for logs and tests.
+    // Called (on the registrar's thread) after the first successful registration with an
+    // LDS-ME (again after a move to another one), for logs and tests.
     void onLdsChanged(std::function<void(const std::string& ldsUrl)> callback);
 
   private:
