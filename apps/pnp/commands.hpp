@@ -3,6 +3,8 @@
 // failures (main() turns them into exit codes 2 and 1).
 #pragma once
 
+#include <signal.h>
+
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -22,7 +24,9 @@ struct DiscoveryOptions {
     std::vector<std::string> mdnsInterfaces;  // default: by the listen address
     int mdnsPort = 5353;
     int mdnsTtl = 2;               // s, of our announcements
-    int expiryMs = 2000;           // LDS-ME: registration expiry
+    // LDS-ME: registration expiry. 1.8 s: a crashed server renewed last up to one
+    // register interval before it died, and is gone everywhere within 2 s.
+    int expiryMs = 1800;
     int registerIntervalMs = 500;  // re-registration period
 };
 
@@ -106,6 +110,10 @@ int runWrite(const ClientOptions& client, const WriteOptions& options);
 int runCall(const ClientOptions& client, const CallOptions& options);
 int runMonitor(const ClientOptions& client, const MonitorOptions& options);
 int runEvents(const ClientOptions& client, const EventsOptions& options);
+
+// Blocks SIGINT and SIGTERM in the calling thread (call before any thread exists: every
+// thread inherits the mask) and returns them, for sigwait() / sigtimedwait().
+sigset_t blockStopSignals();
 
 // "NAME:PASSWORD" -> {NAME, PASSWORD}; throws UsageError.
 std::pair<std::string, std::string> splitUser(const std::string& text);

@@ -146,11 +146,7 @@ DiscoveryRuntime::~DiscoveryRuntime() {
 
 int runLds(std::uint16_t port, const std::string& host, const DiscoveryOptions& o) {
     using namespace pnp::ua;
-    sigset_t stopSignals;
-    sigemptyset(&stopSignals);
-    sigaddset(&stopSignals, SIGINT);
-    sigaddset(&stopSignals, SIGTERM);
-    pthread_sigmask(SIG_BLOCK, &stopSignals, nullptr);
+    const sigset_t stopSignals = blockStopSignals();
 
     server::ServerConfig config;
     config.host = host;
@@ -219,11 +215,7 @@ std::string joined(const std::vector<std::string>& v) {
 
 int runDiscover(const DiscoverOptions& o) {
     using namespace pnp::ua;
-    sigset_t stopSignals;
-    sigemptyset(&stopSignals);
-    sigaddset(&stopSignals, SIGINT);
-    sigaddset(&stopSignals, SIGTERM);
-    pthread_sigmask(SIG_BLOCK, &stopSignals, nullptr);
+    const sigset_t stopSignals = blockStopSignals();
 
     std::unique_ptr<mdns::Mdns> mdns;
     if (o.noMdns && o.lds.empty()) throw UsageError("--no-mdns needs at least one --lds URL");

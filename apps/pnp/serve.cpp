@@ -19,6 +19,15 @@
 
 namespace pnp::cli {
 
+sigset_t blockStopSignals() {
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &set, nullptr);
+    return set;
+}
+
 std::pair<std::string, std::string> splitUser(const std::string& text) {
     auto colon = text.find(':');
     if (colon == std::string::npos || colon == 0)
@@ -71,11 +80,7 @@ int runServe(const ServeOptions& o) {
 
     // Block the stop signals before any thread exists: every thread inherits the mask and
     // this thread takes them synchronously with sigwait().
-    sigset_t stopSignals;
-    sigemptyset(&stopSignals);
-    sigaddset(&stopSignals, SIGINT);
-    sigaddset(&stopSignals, SIGTERM);
-    pthread_sigmask(SIG_BLOCK, &stopSignals, nullptr);
+    const sigset_t stopSignals = blockStopSignals();
 
     server::ServerConfig config;
     config.host = o.host;

@@ -11,7 +11,7 @@
 namespace pnp::ua::discovery {
 
 Registrar::Registrar(server::Server& server, mdns::Mdns* mdns, RegistrarConfig config)
-    : server_(server), mdns_(mdns), config_(std::move(config)) {
+    : server_(server), mdns_(mdns), config_(std::move(config)), worker_(mutex_, wake_) {
     const auto& sc = server_.config();
     if (config_.mdnsServerName.empty())
         config_.mdnsServerName =
@@ -23,28 +23,18 @@ Registrar::Registrar(server::Server& server, mdns::Mdns* mdns, RegistrarConfig c
 Registrar::~Registrar() { stop(); }
 
 void Registrar::start() {
-    if (thread_.joinable()) return;
-    if (config_.ldsUrl.empty() && mdns_) {
-        browse_ = mdns_->browse(kServiceType, [this](const mdns::DiscoveredService& s, bool) {
-            if (!hasCapability(parseTxt(s.txt).capabilities, "LDS")) return;
-            std::lock_guard lock(mutex_);
-            changed_ = true;
-            wake_.notify_all();
-        });
-    }
-    thread_ = std::jthread([this](std::stop_token st) { run(st); });
+    if (worker_.running()) return;
+    worker_.start(
+        config_.ldsUrl.empty() ? mdns_ : nullptr,
+        [this](const mdns::DiscoveredService& s, bool) {
+            if (hasCapability(parseTxt(s.txt).capabilities, "LDS")) changed_ = true;
+        },
+        [this](std::stop_token st) { run(st); });
 }
 
 void Registrar::stop() {
-    if (!thread_.joinable()) return;
-    if (browse_ && mdns_) mdns_->stopBrowse(browse_);
-    browse_ = 0;
-    thread_.request_stop();
-    {
-        std::lock_guard lock(mutex_);
-        wake_.notify_all();
-    }
-    thread_.join();
+    if (!worker_.running()) return;
+    worker_.stop();
     std::string last;
     {
         std::lock_guard lock(mutex_);

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "mdns/mdns.hpp"
+#include "ua/discovery/browsing_worker.hpp"
 
 namespace pnp::ua::server {
 class Server;
@@ -83,8 +84,7 @@ class Registrar {
     std::string registeredWith_;
     std::uint64_t registrations_ = 0;
     std::function<void(const std::string&)> onLdsChanged_;
-    mdns::Mdns::BrowseId browse_ = 0;
-    std::jthread thread_;
+    BrowsingWorker worker_;  // last: stopped before the rest goes
 };
 
 }  // namespace pnp::ua::discovery

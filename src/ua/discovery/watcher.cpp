@@ -22,33 +22,23 @@ std::string normaliseUrl(const std::string& url) {
 }
 
 DiscoveryWatcher::DiscoveryWatcher(mdns::Mdns* mdns, WatcherConfig config, Callback callback)
-    : mdns_(mdns), config_(std::move(config)), callback_(std::move(callback)) {}
+    : mdns_(mdns),
+      config_(std::move(config)),
+      callback_(std::move(callback)),
+      worker_(mutex_, wake_) {}
 
 DiscoveryWatcher::~DiscoveryWatcher() { stop(); }
 
 void DiscoveryWatcher::start() {
-    if (thread_.joinable()) return;
-    if (mdns_) {
-        browse_ = mdns_->browse(kServiceType, [this](const mdns::DiscoveredService& s, bool up) {
-            std::lock_guard lock(mutex_);
+    worker_.start(
+        mdns_,
+        [this](const mdns::DiscoveredService& s, bool up) {
             if (events_.size() < 4 * config_.maxServers) events_.push_back({s, up});
-            wake_.notify_all();
-        });
-    }
-    thread_ = std::jthread([this](std::stop_token st) { run(st); });
+        },
+        [this](std::stop_token st) { run(st); });
 }
 
-void DiscoveryWatcher::stop() {
-    if (!thread_.joinable()) return;
-    if (browse_ && mdns_) mdns_->stopBrowse(browse_);
-    browse_ = 0;
-    thread_.request_stop();
-    {
-        std::lock_guard lock(mutex_);
-        wake_.notify_all();
-    }
-    thread_.join();
-}
+void DiscoveryWatcher::stop() { worker_.stop(); }
 
 std::vector<DiscoveredServer> DiscoveryWatcher::servers() const {
     std::lock_guard lock(mutex_);
@@ -163,6 +153,7 @@ void DiscoveryWatcher::settle() {
 void DiscoveryWatcher::run(std::stop_token stop) {
     using Clock = std::chrono::steady_clock;
     Clock::time_point nextPoll = Clock::now();
+    int quickPolls = 0;  // after a goodbye: polls 20 ms apart (an LDS-ME may not have seen it yet)
     while (!stop.stop_requested()) {
         std::deque<MdnsEvent> events;
         {
@@ -178,9 +169,11 @@ void DiscoveryWatcher::run(std::stop_token stop) {
                 addSource(url, e.service.instance, a.capabilities, "mdns");
             } else {
                 removeSource(url, "mdns");
-                // A goodbye: the LDS-MEs have most likely dropped it too; ask them now rather
-                // than report it gone only at the next poll.
+                // A goodbye: the LDS-MEs have most likely dropped it too; ask them now (and
+                // twice more shortly, for one that had not processed the goodbye yet) rather
+                // than report it gone only at the next regular poll.
                 nextPoll = Clock::now();
+                quickPolls = 3;
             }
         }
         if (Clock::now() >= nextPoll) {
@@ -204,7 +197,9 @@ void DiscoveryWatcher::run(std::stop_token stop) {
                 for (const auto& url : it->second) removeSource(url, it->first);
                 it = ldsListed_.erase(it);
             }
-            nextPoll = Clock::now() + config_.pollInterval;
+            nextPoll = Clock::now() +
+                       (quickPolls > 0 ? std::chrono::milliseconds(20) : config_.pollInterval);
+            if (quickPolls > 0) --quickPolls;
         }
         settle();
         std::unique_lock lock(mutex_);

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "mdns/mdns.hpp"
+#include "ua/discovery/browsing_worker.hpp"
 #include "ua/types/ns0_types.hpp"
 
 namespace pnp::ua::discovery {
@@ -90,8 +91,7 @@ class DiscoveryWatcher {
     std::map<std::string, Entry>
         servers_;  // by normalised URL (watcher thread; copies under mutex_)
     std::map<std::string, std::set<std::string>> ldsListed_;  // LDS URL -> URLs it listed
-    mdns::Mdns::BrowseId browse_ = 0;
-    std::jthread thread_;
+    BrowsingWorker worker_;                                   // last: stopped before the rest goes
 };
 
 }  // namespace pnp::ua::discovery
