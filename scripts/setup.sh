@@ -29,6 +29,9 @@ PACKAGES=(
     nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev
     # interop / capture / process tools
     tshark iproute2 procps util-linux
+    # discovery interop (tests/discovery/discovery_interop_netns_test.cpp): avahi in a
+    # network namespace on a private system bus
+    avahi-daemon avahi-utils dbus
 )
 
 # Node.js: the machine image ships nodesource's nodejs (which bundles npm and

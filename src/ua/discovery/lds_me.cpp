@@ -74,7 +74,7 @@ void LdsMe::start() {
         [this](const server::RegistrationEvent& e) { onRegistration(e); });
     browse_ = mdns_.browse(kServiceType, [lds](const mdns::DiscoveredService& s, bool up) {
         const Announcement a = parseTxt(s.txt);
-        const std::string host = s.addresses.empty() ? s.host : s.addresses.front();
+        const std::string host = urlHost(s.host, s.addresses);
         const std::string url = discoveryUrl(host, s.port, a.path);
         if (up)
             lds->addNetworkRecord({s.instance, url, a.capabilities});

@@ -73,7 +73,7 @@ std::string Registrar::choose() const {
         if (!config_.ownInstance.empty() && s.instance == config_.ownInstance) continue;
         const int level = a.level.value_or(0);
         if (config_.ownLevel && level >= *config_.ownLevel) continue;
-        const std::string host = s.addresses.empty() ? s.host : s.addresses.front();
+        const std::string host = urlHost(s.host, s.addresses);
         Candidate c{level, s.instance, discoveryUrl(host, s.port, a.path)};
         if (std::find(config_.discoveryUrls.begin(), config_.discoveryUrls.end(), c.url) !=
             config_.discoveryUrls.end())

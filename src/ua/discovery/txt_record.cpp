@@ -1,5 +1,7 @@
 #include "ua/discovery/txt_record.hpp"
 
+#include <arpa/inet.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cstdlib>
@@ -63,6 +65,14 @@ bool hasCapability(const std::vector<std::string>& caps, const std::string& cap)
 std::string discoveryUrl(const std::string& host, unsigned port, const std::string& path) {
     const bool v6 = host.find(':') != std::string::npos;
     return "opc.tcp://" + (v6 ? "[" + host + "]" : host) + ":" + std::to_string(port) + path;
+}
+
+std::string urlHost(const std::string& srvTarget, const std::vector<std::string>& addresses) {
+    std::string literal = srvTarget;
+    if (!literal.empty() && literal.back() == '.') literal.pop_back();
+    in_addr a{};
+    if (::inet_pton(AF_INET, literal.c_str(), &a) == 1) return literal;
+    return addresses.empty() ? srvTarget : addresses.front();
 }
 
 std::string dnsLabel(const std::string& text) {

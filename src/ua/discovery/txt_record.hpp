@@ -30,6 +30,12 @@ bool hasCapability(const std::vector<std::string>& caps, const std::string& cap)
 // `.local` names need mDNS resolution, which few resolvers do).
 std::string discoveryUrl(const std::string& hostOrAddress, unsigned port, const std::string& path);
 
+// The host for a discovery URL of an mDNS service: the SRV target itself when it is an IPv4
+// literal ("10.0.0.4", also with a trailing dot: node-opcua's LDS announces the servers
+// registered with it that way, and puts its *own* addresses in the A records of that name),
+// else the first A record's address, else the SRV target.
+std::string urlHost(const std::string& srvTarget, const std::vector<std::string>& addresses);
+
 // A DNS label from any text: letters, digits and '-' kept, others '-', at most 63 bytes.
 std::string dnsLabel(const std::string& text);
 

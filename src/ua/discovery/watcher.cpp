@@ -162,8 +162,7 @@ void DiscoveryWatcher::run(std::stop_token stop) {
         }
         for (const auto& e : events) {
             const Announcement a = parseTxt(e.service.txt);
-            const std::string host =
-                e.service.addresses.empty() ? e.service.host : e.service.addresses.front();
+            const std::string host = urlHost(e.service.host, e.service.addresses);
             const std::string url = discoveryUrl(host, e.service.port, a.path);
             if (e.up) {
                 addSource(url, e.service.instance, a.capabilities, "mdns");
