@@ -207,8 +207,8 @@ class Client::Impl {
     }
 
     // Makes the background thread re-evaluate what it waits for. Not needed on that thread
-    // itself: it does so before it next waits (this saves three system calls per data change,
-    // whose callback sends the next Publish).
+    // itself: after running callbacks it goes round its loop again before it waits (this
+    // saves three system calls per data change, whose callback sends the next Publish).
     void wake() const {
         if (wakeFd >= 0 &&
             backgroundThreadId.load(std::memory_order_relaxed) != std::this_thread::get_id()) {
@@ -697,7 +697,14 @@ class Client::Impl {
                     watched = generation;
                 }
             }
-            done.run();
+            // The callbacks may have sent requests (wake() does not signal this thread): the
+            // socket events and the deadline computed above may be stale, so look again
+            // before waiting (a Republish sent by a callback was otherwise left unread for up
+            // to a second).
+            if (done.run() > 0) {
+                revents = 0;
+                continue;
+            }
             revents = waitForEvents(fd, events, until);
         }
     }

@@ -14,6 +14,7 @@
 #include <condition_variable>
 #include <mutex>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include "support/child_process.hpp"
@@ -127,6 +128,18 @@ class SubscriptionInterop : public ::testing::Test {
 };
 
 const Int32* int32Of(const DataValue& v) { return v.value ? v.value->scalar<Int32>() : nullptr; }
+
+// The counter values between the lowest and the highest one in `values` that are not there.
+std::vector<Int32> missingValues(const std::vector<DataValue>& values) {
+    std::set<Int32> seen;
+    for (const DataValue& v : values)
+        if (const Int32* x = int32Of(v)) seen.insert(*x);
+    std::vector<Int32> out;
+    if (seen.empty()) return out;
+    for (Int32 x = *seen.begin(); x < *seen.rbegin(); ++x)
+        if (!seen.count(x)) out.push_back(x);
+    return out;
+}
 
 TEST_F(SubscriptionInterop, DataChangesOfACountingVariable) {
     Client client;
@@ -296,30 +309,54 @@ TEST_F(SubscriptionInterop, SurvivesADroppedConnectionWithTheSameSession) {
 
     relay.cut();
     std::size_t before = rec.valueCount();
-    ASSERT_TRUE(rec.waitFor(20s,
-                            [&](Recorder& r) {
-                                return r.sawStatus(SubscriptionStatus::Kind::Republished) &&
-                                       r.values.size() >= before + 5;
-                            }))
-        << "statuses:\n"
-        << rec.log << "values: " << rec.valueCount() - before
-        << ", reconnects: " << client.stats().reconnects
-        << ", connections lost: " << client.stats().connectionsLost
-        << ", publish responses: " << client.subscriptionEngine()->stats().publishResponses;
-    EXPECT_EQ(client.sessionId(), session);
-    EXPECT_EQ(sub.id(), id);  // the same subscription on the server
+    // Wait for the re-activation, 5 new values and every value between the first and the
+    // last seen. The Republished status comes with the re-activation, before the client can
+    // know what it missed: a message lost with the old connection shows as a gap in the
+    // sequence numbers of the next message, and only then is it asked for by Republish. Its
+    // values therefore always arrive after newer ones, one round trip later (this test used
+    // to check as soon as 5 new values had arrived, racing that round trip). A value that is
+    // never delivered still fails the test, with the report below.
+    bool complete = rec.waitFor(20s, [&](Recorder& r) {
+        return r.sawStatus(SubscriptionStatus::Kind::Republished) &&
+               r.values.size() >= before + 5 && missingValues(r.values).empty();
+    });
+    std::lock_guard lock(rec.m);
     // No change was lost: the queue (100) and republishing cover the gap. (node-opcua
     // re-sends the current value after every ActivateSession, and a republished message may
     // arrive after newer ones: compare the set of values, not the sequence.)
-    std::lock_guard lock(rec.m);
     std::set<Int32> seen;
-    for (const DataValue& v : rec.values) {
-        const Int32* x = int32Of(v);
+    std::string arrived;  // in arrival order, "|" where the cut was
+    for (std::size_t i = 0; i < rec.values.size(); ++i) {
+        const Int32* x = int32Of(rec.values[i]);
         ASSERT_NE(x, nullptr);
         seen.insert(*x);
+        arrived += (i == before ? " | " : " ") + std::to_string(*x);
     }
+    std::string missing;
+    for (Int32 x : missingValues(rec.values)) missing += " " + std::to_string(x);
+    SubscriptionEngineStats es = client.subscriptionEngine()->stats();
+    ClientStats cs = client.stats();
+    std::ostringstream report;
+    report << "values after the cut: " << rec.values.size() - before << "\nmissing counter values"
+           << (seen.empty() ? std::string()
+                            : " between " + std::to_string(*seen.begin()) + " and " +
+                                  std::to_string(*seen.rbegin()))
+           << ":" << missing << "\nvalues in arrival order:" << arrived << "\nstatuses:\n"
+           << rec.log << "engine: publish responses " << es.publishResponses << ", keep-alives "
+           << es.keepAlives << ", republished " << es.republished << ", duplicates "
+           << es.duplicates << ", unknown handles " << es.unknownHandles << ", malformed "
+           << es.malformed << "\nclient: requests " << cs.requestsSent << ", timeouts "
+           << cs.timeouts << ", discarded responses " << cs.discardedResponses
+           << ", connections lost " << cs.connectionsLost << ", reconnects " << cs.reconnects
+           << ", sessions reactivated " << cs.sessionsReactivated << ", created "
+           << cs.sessionsCreated << ", retries " << cs.retries;
+    ASSERT_TRUE(rec.sawStatus(SubscriptionStatus::Kind::Republished)) << report.str();
+    ASSERT_GE(rec.values.size(), before + 5) << report.str();
     EXPECT_EQ(static_cast<std::size_t>(*seen.rbegin() - *seen.begin() + 1), seen.size())
-        << "missing counter values between " << *seen.begin() << " and " << *seen.rbegin();
+        << report.str();
+    EXPECT_TRUE(complete) << report.str();
+    EXPECT_EQ(client.sessionId(), session);
+    EXPECT_EQ(sub.id(), id);  // the same subscription on the server
 }
 
 }  // namespace
