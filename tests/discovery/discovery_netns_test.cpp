@@ -312,12 +312,19 @@ TEST_F(DiscoveryNetns, UnpluggedDevicesDisappear) {
         "[ figures  ] gone on the cell bus: graceful stop %.1f ms, kill -9 %.1f ms, "
         "link down %.1f ms\n",
         graceful, killed, linkDown);
-    EXPECT_LT(graceful, 100.0);
+    // The targets hold in optimised builds; under the sanitizers (every process several
+    // times slower) the same behaviour is checked with looser bounds.
+#ifdef PNP_SANITIZED_BUILD
+    constexpr double kGracefulMs = 1000, kCrashMs = 2500;
+#else
+    constexpr double kGracefulMs = 100, kCrashMs = 2000;
+#endif
+    EXPECT_LT(graceful, kGracefulMs);
     // Within 2 s: `pnp`'s registration expiry (1.8 s) after the last registration, which
     // came at most one interval (500 ms) before the crash, plus the LDS-ME's timer and the
     // goodbye (a few ms).
-    EXPECT_LT(killed, 2000.0);
-    EXPECT_LT(linkDown, 2000.0);
+    EXPECT_LT(killed, kCrashMs);
+    EXPECT_LT(linkDown, kCrashMs);
 
     // The others are still there.
     const auto up = cell.upNow();
