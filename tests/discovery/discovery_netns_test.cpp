@@ -100,6 +100,14 @@ class Cell {
     void startDevice(const std::string& d) {
         start(d, {"ua", "serve", "--port", "4840", "--public-host", deviceAddress(d), "--name", d});
     }
+    // The watcher, then the cell bus, the workstations and the devices (the natural order).
+    void startEverything() {
+        startWatcher();
+        startCell();
+        startWorkstation(1);
+        startWorkstation(2);
+        for (const std::string d : kDevices) startDevice(d);
+    }
     ChildProcess* process(const std::string& host) {
         auto it = processes_.find(host);
         return it == processes_.end() ? nullptr : it->second.get();
@@ -214,11 +222,7 @@ double percentile(std::vector<double> v, double p) {
 
 TEST_F(DiscoveryNetns, ClientOnTheCellBusSeesWorkstationsAndTheirDevices) {
     Cell cell;
-    cell.startWatcher();
-    cell.startCell();
-    cell.startWorkstation(1);
-    cell.startWorkstation(2);
-    for (const std::string d : kDevices) cell.startDevice(d);
+    cell.startEverything();
     EXPECT_TRUE(cell.waitUp(everything(), 10s)) << "up: " << cell.upNow().size();
 }
 
@@ -280,11 +284,7 @@ TEST_F(DiscoveryNetns, DeviceStartToVisibleOnTheCellBus) {
 
 TEST_F(DiscoveryNetns, UnpluggedDevicesDisappear) {
     Cell cell;
-    cell.startWatcher();
-    cell.startCell();
-    cell.startWorkstation(1);
-    cell.startWorkstation(2);
-    for (const std::string d : kDevices) cell.startDevice(d);
+    cell.startEverything();
     ASSERT_TRUE(cell.waitUp(everything(), 10s));
 
     // Graceful stop: gone everywhere within 100 ms.
