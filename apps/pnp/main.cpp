@@ -88,7 +88,9 @@ int main(int argc, char** argv) {
     CLI::App app{"pnp — Plug & Produce robot cells on OPC UA", "pnp"};
     app.require_subcommand(1);
     app.set_version_flag("--version", "pnp 0.1.0");
-    app.footer("Run `pnp ua --help` for the OPC UA tools.");
+    app.footer(
+        "Run `pnp ua --help` for the OPC UA tools, `pnp lds --help` and `pnp discover --help` "
+        "for discovery (docs/discovery.md).");
 
     std::uint16_t ldsPort = 4840;
     std::string ldsHost = "0.0.0.0";
