@@ -253,8 +253,11 @@ int runDiscover(const DiscoverOptions& o) {
                 std::cout << j.dump() << std::endl;
             } else {
                 std::cout << (up ? "+ " : "- ") << s.name << "  " << s.discoveryUrl
-                          << "  caps=" << joined(s.capabilities) << "  via "
-                          << joined(std::vector<std::string>(s.sources.begin(), s.sources.end()));
+                          << "  caps=" << joined(s.capabilities);
+                if (up)  // a server that went has no source left
+                    std::cout << "  via "
+                              << joined(
+                                     std::vector<std::string>(s.sources.begin(), s.sources.end()));
                 if (up && s.application)
                     std::cout << "  (" << s.application->applicationUri << ", "
                               << s.endpoints.size() << " endpoint(s))";
