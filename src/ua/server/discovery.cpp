@@ -463,10 +463,14 @@ void LocalDiscovery::run() {
             lock.lock();
             continue;
         }
-        if (expiry_.empty())
+        if (expiry_.empty()) {
             wake_.wait(lock);
-        else
-            wake_.wait_until(lock, expiry_.begin()->first);
+        } else {
+            // A copy: wait_until reads its deadline again after waking, when a registration on
+            // another thread may have erased the set's node (found by ASan).
+            const Clock::time_point next = expiry_.begin()->first;
+            wake_.wait_until(lock, next);
+        }
     }
 }
 
