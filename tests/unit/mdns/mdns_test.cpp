@@ -591,13 +591,15 @@ TEST(Mdns, CacheStaysBoundedUnderAFlood) {
     // Most of the newest services stay resolved (some packets of the burst may be dropped
     // by the socket buffer, more so under the sanitizers).
     EXPECT_GT(n, 100u);
-    // Still working: a new service is seen at once.
-    peer->sendToGroup(announcement("after-flood", 120, {10, 77, 12, 1}), kPort);
-#ifdef PNP_SANITIZED_BUILD  // a Debug build under ASan works through the flood far slower
-    EXPECT_TRUE(browser.waitEvent("after-flood", true, 15000ms));
-#else
-    EXPECT_TRUE(browser.waitEvent("after-flood", true, 2000ms));
-#endif
+    // Still working: a new service is seen. Announced again every 500 ms, as responders
+    // repeat announcements: under the sanitizers the engine may still be working through
+    // the flood, and the socket buffer may drop the first one.
+    bool seen = false;
+    for (int i = 0; i < 30 && !seen; ++i) {
+        peer->sendToGroup(announcement("after-flood", 120, {10, 77, 12, 1}), kPort);
+        seen = browser.waitEvent("after-flood", true, 500ms).has_value();
+    }
+    EXPECT_TRUE(seen);
 }
 
 TEST(Mdns, NoCallbackAfterStopBrowseReturns) {
