@@ -288,7 +288,15 @@ void AddressSpace::Impl::copyDeclaredChildren(NodeIndex instance, NodeIndex decl
     for (const Child& c : children) {
         const Node& decl = nodes[c.node];
         QualifiedName name{decl.browseNs, String(strings.get(decl.browseName))};
-        if (childByName(instance, name) != kNoNode) continue;  // overridden by a subtype
+        // Overridden by a subtype's declaration: the fully-inherited InstanceDeclaration
+        // hierarchy (OPC 10000-3 §6.3.3.3) still has this declaration's children at the paths
+        // the override does not declare (e.g. ParameterSet/ToolFrame of a supertype below a
+        // subtype's ParameterSet), so merge them in.
+        if (NodeIndex existing = childByName(instance, name); existing != kNoNode) {
+            if (nodes[existing].nodeClass != NodeClassBits::Method)
+                copyDeclaredChildren(existing, c.node, depth + 1, optional);
+            continue;
+        }
         copyDeclaration(instance, c.type, c.node, depth + 1, optional);
     }
 }
