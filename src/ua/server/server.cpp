@@ -422,6 +422,7 @@ void Server::expireSessions() {
         // A session that timed out leaves its subscriptions to their own lifetime, so that
         // the client can take them over from a new session (Part 4 §5.6.2).
         subscriptions_->removeSession(kv.second->sessionId, false);
+        sessionClosed(kv.second->sessionId);
         return true;
     });
     updateSessionCount();
@@ -520,7 +521,9 @@ void Server::closeSession(Ctx& ctx, const CloseSessionRequest& req, CloseSession
     // deleteSubscriptions false: the subscriptions live on until their lifetime expires or
     // another session of the same user transfers them (TransferSubscriptions).
     subscriptions_->removeSession(it->second->sessionId, req.deleteSubscriptions);
+    const NodeId closed = it->second->sessionId;
     sessions_.erase(it);
+    sessionClosed(closed);
     updateSessionCount();
 }
 
@@ -541,19 +544,53 @@ void Server::write(Ctx& ctx, const WriteRequest& req, WriteResponse& resp) {
         return;
     }
     auto& ac = *config_.accessControl;
+    const bool guarded = hasWriteGuards_.load(std::memory_order_acquire);
+    std::shared_lock guards(guardsMutex_, std::defer_lock);
+    if (guarded) guards.lock();
+    auto check = [&](const WriteValue& w) -> StatusCode {
+        if (!ac.allowWrite(ctx.session->identity, w.nodeId)) return status::BadUserAccessDenied;
+        if (guarded) {
+            auto g = writeGuards_.find(w.nodeId);
+            if (g != writeGuards_.end()) return g->second(ctx.session->sessionId, w);
+        }
+        return status::Good;
+    };
     bool allowedAll = true;
-    for (const auto& w : req.nodesToWrite)
-        allowedAll = allowedAll && ac.allowWrite(ctx.session->identity, w.nodeId);
+    for (const auto& w : req.nodesToWrite) allowedAll = allowedAll && check(w).isGood();
     if (allowedAll) {
+        guards = {};
         resp = addressSpace_->write(req);
         return;
     }
     // Some items are refused: write the others one by one.
     resp.results.reserve(req.nodesToWrite.size());
-    for (const auto& w : req.nodesToWrite)
-        resp.results.push_back(ac.allowWrite(ctx.session->identity, w.nodeId)
-                                   ? addressSpace_->write(w)
-                                   : StatusCode(status::BadUserAccessDenied));
+    for (const auto& w : req.nodesToWrite) {
+        StatusCode c = check(w);
+        resp.results.push_back(c.isGood() ? addressSpace_->write(w) : c);
+    }
+}
+
+void Server::setWriteGuard(const NodeId& node, WriteGuard guard) {
+    std::unique_lock lock(guardsMutex_);
+    if (guard)
+        writeGuards_[node] = std::move(guard);
+    else
+        writeGuards_.erase(node);
+    hasWriteGuards_.store(!writeGuards_.empty(), std::memory_order_release);
+}
+
+void Server::onSessionClosed(std::function<void(const NodeId& sessionId)> observer) {
+    std::unique_lock lock(guardsMutex_);
+    sessionClosedObservers_.push_back(std::move(observer));
+}
+
+void Server::sessionClosed(const NodeId& sessionId) {
+    std::vector<std::function<void(const NodeId&)>> observers;
+    {
+        std::shared_lock lock(guardsMutex_);
+        observers = sessionClosedObservers_;
+    }
+    for (const auto& o : observers) o(sessionId);
 }
 
 void Server::browse(Ctx& ctx, const BrowseRequest& req, BrowseResponse& resp) {

@@ -14,6 +14,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <shared_mutex>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -102,6 +103,17 @@ class Server : public transport::ServiceHandler {
     // Open sessions (any thread).
     std::size_t sessionCount() const { return sessionCount_.load(std::memory_order_relaxed); }
 
+    // A per-node check of the Write service that knows the writing session (e.g. a DI lock:
+    // only the lock holder may write a skill's parameters). Runs on the network thread after
+    // access control and before the address space's own checks; a Bad result is that item's
+    // result. Any thread; an empty guard removes the node's guard.
+    using WriteGuard = std::function<StatusCode(const NodeId& sessionId, const WriteValue& item)>;
+    void setWriteGuard(const NodeId& node, WriteGuard guard);
+    // Told of every session that ends (CloseSession, timeout, server stop), on the network
+    // thread: must be quick. Observers cannot be removed (they live as long as the server,
+    // so capture weak references). Any thread.
+    void onSessionClosed(std::function<void(const NodeId& sessionId)> observer);
+
   private:
     struct Session;
     struct Ctx;
@@ -160,6 +172,11 @@ class Server : public transport::ServiceHandler {
     std::unordered_map<NodeId, std::unique_ptr<Session>> sessions_;  // by authentication token
     UInt32 nextSessionNumber_ = 1;
     std::atomic<std::size_t> sessionCount_{0};
+    mutable std::shared_mutex guardsMutex_;
+    std::unordered_map<NodeId, WriteGuard> writeGuards_;
+    std::atomic<bool> hasWriteGuards_{false};
+    std::vector<std::function<void(const NodeId&)>> sessionClosedObservers_;  // guardsMutex_
+    void sessionClosed(const NodeId& sessionId);
     void updateSessionCount() { sessionCount_.store(sessions_.size(), std::memory_order_relaxed); }
 };
 

@@ -381,7 +381,21 @@ struct FiniteStateMachine::Impl {
         add("Transition", tr.displayName, tr.node, tr.number);
         add("FromState", fs.displayName, fs.node, fs.number);
         add("ToState", ts.displayName, ts.node, ts.number);
-        for (auto& f : extra) e.fields.push_back(std::move(f));
+        for (auto& f : extra) {
+            // Message and Severity given by the caller replace the defaults.
+            if (f.first.size() == 1 && f.first[0].namespaceIndex == 0) {
+                if (f.first[0].name == "Message") {
+                    if (const auto* m = f.second.scalar<LocalizedText>()) e.message = *m;
+                    if (const auto* m = f.second.scalar<String>()) e.message = LocalizedText("", *m);
+                    continue;
+                }
+                if (f.first[0].name == "Severity") {
+                    if (const auto* v = f.second.scalar<UInt16>()) e.severity = *v;
+                    continue;
+                }
+            }
+            e.fields.push_back(std::move(f));
+        }
         server.fireEvent(std::move(e));
 
         TransitionObserver tell = observer;

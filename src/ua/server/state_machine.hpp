@@ -163,7 +163,8 @@ class FiniteStateMachine {
 
     // Goes to state `to` (by BrowseName name) along the transition from the current state
     // to it. Bad_InvalidState when there is none (nothing changes), Bad_NotFound for an
-    // unknown state. `extraFields` are added to the event (e.g. IntermediateResult).
+    // unknown state. `extraFields` are added to the event (e.g. IntermediateResult); fields
+    // "Message" (LocalizedText or String) and "Severity" (UInt16) replace the defaults.
     StatusCode transitionTo(
         std::string_view to,
         std::vector<std::pair<std::vector<QualifiedName>, Variant>> extraFields = {});
