@@ -41,8 +41,8 @@ function check(ok, what) {
 function child(node, names) {
     for (const name of names) {
         if (!node) return null;
-        node = node.getChildByName(name.replace(/^\d+:/, ""), name.includes(":") ? Number(name.split(":")[0]) : 0)
-            || node.getChildByName(name.replace(/^\d+:/, ""));
+        const m = /^(\d+):(.*)$/.exec(name);
+        node = m ? node.getChildByName(m[2], Number(m[1])) : node.getChildByName(name, 0);
     }
     return node;
 }
@@ -51,7 +51,17 @@ async function main() {
     const addressSpace = AddressSpace.create();
     const files = [nodesets.standard, nodesets.di, nodesets.ia, nodesets.robotics].concat(
         FILES.map((f) => path.join(modelsDir, f)));
-    await generateAddressSpace(addressSpace, files);
+    // node-opcua reports problems of a NodeSet (unknown nodes, bad values) as log lines:
+    // any line logged while loading is a failure.
+    const logged = [];
+    const saved = [console.log, console.warn, console.error];
+    console.log = console.warn = console.error = (...args) => logged.push(args.join(" "));
+    try {
+        await generateAddressSpace(addressSpace, files);
+    } finally {
+        [console.log, console.warn, console.error] = saved;
+    }
+    for (const line of logged) if (line.trim()) check(false, `loader said: ${line}`);
 
     const ns = (uri) => {
         const i = addressSpace.getNamespaceIndex(uri);
@@ -111,6 +121,28 @@ async function main() {
         organizedBy: objects,
     });
     check(!!child(delay, [`${di}:ParameterSet`, `${demo}:DurationMs`]), "Delay/ParameterSet/DurationMs");
+
+    // Parameters of the supertypes are merged below the subtype's ParameterSet. (node-opcua
+    // 2.186 does not merge an interface's nested declarations, e.g. TargetPosition from
+    // ICartesianMoveSkillParameterType below ParameterSet; our server does.)
+    const forceType = addressSpace.findObjectType("CartesianLinearForceMoveSkillType", rob);
+    const force = forceType.instantiate({
+        browseName: { name: "ForceMove", namespaceIndex: 1 },
+        organizedBy: objects,
+    });
+    for (const p of ["MaxForce", "MaxVelocity", "MaxAcceleration", "ToolFrame"])
+        check(!!child(force, [`${di}:ParameterSet`, `${rob}:${p}`]),
+              `ForceMove/ParameterSet/${p}`);
+    check(!!child(force, ["FinalResultData", `${base}:Result`]),
+          "ForceMove/FinalResultData/Result");
+    // A skill controller: the interface's Skills folder and Name.
+    const arm = addressSpace.findObjectType("SkillMotionDeviceType", rob).instantiate({
+        browseName: { name: "Arm", namespaceIndex: 1 },
+        organizedBy: objects,
+    });
+    check(!!child(arm, [`${base}:Skills`]), "Arm/Skills");
+    check(!!child(arm, [`${base}:Name`]), "Arm/Name");
+    check(!!child(arm, [`${rob}:WorldToRobotBase`]), "Arm/WorldToRobotBase");
 
     if (failures) {
         out(`${failures} check(s) failed`);

@@ -176,7 +176,9 @@ TEST(SkillModels, EveryContractTypeWithSupertypeAndIsAbstract) {
     // The enumerations carry EnumStrings.
     auto es = m.child(NodeId(m.base, 3001), {{0, "EnumStrings"}});
     ASSERT_TRUE(es);
-    const auto* strings = m.space.readValue(*es).value->array<LocalizedText>();
+    const DataValue esValue = m.space.readValue(*es);
+    ASSERT_TRUE(esValue.value);
+    const auto* strings = esValue.value->array<LocalizedText>();
     ASSERT_TRUE(strings);
     ASSERT_EQ(strings->size(), 4u);
     EXPECT_EQ((*strings)[0].text, "None");
@@ -370,7 +372,9 @@ TEST(SkillModels, SkillControllerInterfaceGivesSkillsAndName) {
     EXPECT_FALSE(m.child(arm, {{m.rob, "SetTool"}}));  // Optional
     auto setTool = m.child(NodeId(m.rob, 1012), {{m.rob, "SetTool"}, {0, "InputArguments"}});
     ASSERT_TRUE(setTool);
-    const auto* args = m.space.readValue(*setTool).value->array<ExtensionObject>();
+    const DataValue argsValue = m.space.readValue(*setTool);
+    ASSERT_TRUE(argsValue.value);
+    const auto* args = argsValue.value->array<ExtensionObject>();
     ASSERT_TRUE(args);
     EXPECT_EQ(args->size(), 2u);
 }
