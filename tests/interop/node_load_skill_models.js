@@ -120,7 +120,8 @@ async function main() {
         browseName: { name: "Delay", namespaceIndex: 1 },
         organizedBy: objects,
     });
-    check(!!child(delay, [`${di}:ParameterSet`, `${demo}:DurationMs`]), "Delay/ParameterSet/DurationMs");
+    check(!!child(delay, [`${di}:ParameterSet`, `${demo}:DurationMs`]),
+          "Delay/ParameterSet/DurationMs");
 
     // Parameters of the supertypes are merged below the subtype's ParameterSet. (node-opcua
     // 2.186 does not merge an interface's nested declarations, e.g. TargetPosition from
