@@ -236,6 +236,11 @@ class Skill {
         return declare<T>(std::move(name), true, std::move(defaultValue));
     }
 
+    // An untyped declaration (the callbacks form).
+    void declareRaw(ParameterDeclaration declaration) {
+        parameters_.push_back(std::move(declaration));
+    }
+
   private:
     template <class T>
     Param<T> declare(std::string name, bool optional, T defaultValue) {
