@@ -255,9 +255,11 @@ class Skill {
 
 // The callbacks form: a skill without a class of its own.
 struct SkillCallbacks {
-    std::function<Outcome(Execution&)> execute;
-    std::function<ua::StatusCode()> suspend, resume, reset;
-    std::function<void()> halt;
+    std::function<Outcome(Execution&)> execute = {};
+    std::function<ua::StatusCode()> suspend = {};
+    std::function<ua::StatusCode()> resume = {};
+    std::function<ua::StatusCode()> reset = {};
+    std::function<void()> halt = {};
 };
 std::shared_ptr<Skill> makeSkill(ModelNode type, std::vector<ParameterDeclaration> parameters,
                                  SkillCallbacks callbacks);
