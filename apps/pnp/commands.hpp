@@ -38,6 +38,9 @@ struct ServeOptions {
     bool noAnonymous = false;
     std::vector<std::string> nodesets;   // NodeSet2 XML files loaded at start (with their deps)
     std::vector<std::string> instances;  // TYPE=NAME: an instance of TYPE below Objects
+    // `pnp demo-skills`: a skill controller of this name with the demo skills
+    // (src/skill/demo); empty: none.
+    std::string skillController;
 };
 
 // Options every client subcommand takes.

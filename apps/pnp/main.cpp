@@ -126,6 +126,23 @@ int main(int argc, char** argv) {
         ->capture_default_str()
         ->check(CLI::Range(10, 600000));
 
+    ServeOptions skillsOpts;
+    skillsOpts.skillController = "DemoGripper";
+    CLI::App* demoSkills = app.add_subcommand(
+        "demo-skills", "run a skill server: a demo gripper with the skills Delay, Grasp, Release, "
+                       "MoveGripper (docs/skills.md)");
+    demoSkills->add_option("--port", skillsOpts.port, "TCP port (0: any free port)")
+        ->capture_default_str();
+    demoSkills->add_option("--host", skillsOpts.host, "address to listen on")
+        ->capture_default_str();
+    demoSkills->add_option("--controller", skillsOpts.skillController,
+                           "name of the skill controller (the device node)")
+        ->capture_default_str();
+    addDiscoveryOptions(demoSkills, skillsOpts.discovery, false);
+    demoSkills->footer(
+        "Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM.\n"
+        "Try: pnp skills --once; pnp skill run opc.tcp://127.0.0.1:4840 Delay DurationMs=500");
+
     CLI::App* ua =
         app.add_subcommand("ua", "OPC UA tools: a demo server and a command-line client");
     ua->require_subcommand(1);
@@ -249,6 +266,7 @@ int main(int argc, char** argv) {
                       (*monitor && moOpts.json) || (*events && evOpts.json);
     try {
         if (*serve) return runServe(serveOpts);
+        if (*demoSkills) return runServe(skillsOpts);
         if (*lds) return runLds(ldsPort, ldsHost, ldsOpts);
         if (*discover) return runDiscover(discoverOpts);
         if (*endpoints) return runEndpoints(epOpts);

@@ -11,6 +11,7 @@
 #include <memory>
 
 #include "commands.hpp"
+#include "skill/demo/demo_skills.hpp"
 #include "discovery_commands.hpp"
 #include "output.hpp"
 #include "ua/demo/demo.hpp"
@@ -93,8 +94,11 @@ int runServe(const ServeOptions& o) {
     // Declared after the server, so destroyed first: pending Demo.Sleep calls are completed
     // (BadShutdown) while the transport still exists.
     demo::DemoNamespace demoNamespace(server);
+    std::unique_ptr<pnp::skill::server::SkillController> skills;
     try {
         loadModels(server.addressSpace(), o);
+        if (!o.skillController.empty())
+            skills = pnp::skill::demo::addDemoSkills(server, o.skillController);
     } catch (const std::exception& e) {
         std::cerr << "error: " << e.what() << "\n";
         return kExitUaError;
@@ -119,6 +123,10 @@ int runServe(const ServeOptions& o) {
               << " is ns=" << demoNamespace.namespaceIndex() << "; anonymous "
               << (o.noAnonymous ? "refused" : "allowed") << "; " << o.users.size() << " user(s); "
               << discovery->status() << "; stop with Ctrl-C or SIGTERM" << std::endl;
+    if (skills)
+        std::cerr << "pnp demo-skills: skill controller " << o.skillController
+                  << " with the skills Delay, Grasp, Release, MoveGripper (models "
+                  << pnp::skill::kBaseUri << ", " << pnp::skill::kDemoUri << ")" << std::endl;
 
     int sig = 0;
     while (sigwait(&stopSignals, &sig) != 0) {
@@ -126,6 +134,7 @@ int runServe(const ServeOptions& o) {
     std::cerr << "pnp ua serve: " << (sig == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping"
               << std::endl;
     discovery.reset();  // unregisters first: the server disappears everywhere at once
+    skills.reset();     // halts running skills and joins their workers
     server.stop();
     return kExitOk;
 }
