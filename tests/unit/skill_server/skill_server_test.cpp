@@ -402,3 +402,102 @@ TEST(SkillServer, TheControllerImplementsISkillControllerTypeBelowDeviceSet) {
 
 }  // namespace
 }  // namespace pnp::skill
+
+namespace pnp::skill {
+namespace {
+
+// Bad input gets a clear status and the skill keeps serving.
+TEST(SkillServer, BadRequestsGetAStatusAndTheSkillKeepsWorking) {
+    SkillServer s;
+    Session a(s.server);
+    const NodeId delay = s.skill("Delay");
+    // Arguments to a method without any.
+    auto r = a.c.call(delay, s.method(delay, "Start"), {Variant(1.0)});
+    EXPECT_EQ(r.status, status::BadTooManyArguments);
+    // A method of another skill called on this one.
+    r = a.c.call(delay, s.method(s.skill("Grasp"), "Start"), {});
+    EXPECT_TRUE(r.status.isBad());
+    // InitLock with a context that is not a String.
+    r = a.c.call(s.member(delay, {{kDiUri, "Lock"}}), s.lockMethod(delay, "InitLock"),
+                 {Variant(ua::Int32{7})});
+    EXPECT_TRUE(r.status.isBad() || (!r.inputArgumentResults.empty() &&
+                                     r.inputArgumentResults[0].isBad()));
+    // A parameter of the wrong type, a result variable, a state variable.
+    EXPECT_EQ(a.c.writeValue(s.parameter(delay, "DurationMs"), ua::String("soon")),
+              status::BadTypeMismatch);
+    EXPECT_TRUE(
+        a.c.writeValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}),
+                       ua::Int32{1})
+            .isBad());
+    EXPECT_TRUE(a.c.writeValue(s.member(delay, {{"", "CurrentState"}}),
+                               ua::LocalizedText("", "Running"))
+                    .isBad());
+    // A DurationMs the skill refuses ends the run Failed with the reason.
+    ASSERT_EQ(a.c.writeValue(s.parameter(delay, "DurationMs"), -5.0), status::Good);
+    ASSERT_EQ(a.call(delay, s.method(delay, "Start")), status::Good);
+    for (int i = 0; i < 500 && a.stateNumber(s, delay) != kHalted; ++i)
+        std::this_thread::sleep_for(1ms);
+    EXPECT_EQ(a.stateNumber(s, delay), kHalted);
+    // Resume / Suspend in the wrong state.
+    EXPECT_TRUE(a.call(delay, s.method(delay, "Resume")).isBad());
+    EXPECT_TRUE(a.call(delay, s.method(delay, "Suspend")).isBad());
+    ASSERT_EQ(a.call(delay, s.method(delay, "Reset")), status::Good);
+    ASSERT_EQ(a.c.writeValue(s.parameter(delay, "DurationMs"), 0.0), status::Good);
+    ASSERT_EQ(a.call(delay, s.method(delay, "Start")), status::Good);
+    for (int i = 0; i < 500 && a.stateNumber(s, delay) != kReady; ++i)
+        std::this_thread::sleep_for(1ms);
+    EXPECT_EQ(a.stateNumber(s, delay), kReady);
+}
+
+// A skill whose execute() throws ends Failed with the exception's message; a skill that
+// ignores Halt does not keep the state machine from Halted, and Reset waits for it.
+TEST(SkillServer, ThrowingAndStubbornSkillsStayWithinTheStateMachine) {
+    std::atomic<bool> release{false};
+    SkillServer s([&](SkillServer& self) {
+        self.controller = std::make_unique<server::SkillController>(
+            self.server, server::SkillControllerOptions{.name = "DemoGripper"});
+        self.controller->add(
+            "Thrower", server::makeSkill(types::DelaySkillType, {},
+                                         {.execute = [](server::Execution&) -> server::Outcome {
+                                             throw std::runtime_error("axis 3 overheated");
+                                         }}));
+        self.controller->add(
+            "Stubborn", server::makeSkill(types::DelaySkillType, {},
+                                          {.execute = [&](server::Execution&) {
+                                              for (int i = 0; i < 5000 && !release; ++i)
+                                                  std::this_thread::sleep_for(1ms);
+                                              return server::Outcome::completed();
+                                          }}));
+    });
+    Session a(s.server);
+    const NodeId thrower = s.skill("Thrower");
+    ASSERT_EQ(a.call(thrower, s.method(thrower, "Start")), status::Good);
+    for (int i = 0; i < 500 && a.stateNumber(s, thrower) != kHalted; ++i)
+        std::this_thread::sleep_for(1ms);
+    EXPECT_EQ(a.stateNumber(s, thrower), kHalted);
+    Variant msg =
+        a.c.readValue(s.member(thrower, {{"", "FinalResultData"}, {kBaseUri, "Message"}}));
+    EXPECT_EQ(*msg.scalar<ua::String>(), "axis 3 overheated");
+
+    const NodeId stubborn = s.skill("Stubborn");
+    ASSERT_EQ(a.call(stubborn, s.method(stubborn, "Start")), status::Good);
+    ASSERT_EQ(a.call(stubborn, s.method(stubborn, "Halt")), status::Good);
+    EXPECT_EQ(a.stateNumber(s, stubborn), kHalted);
+    // Reset completes once the run has returned, not before.
+    std::atomic<bool> resetDone{false};
+    a.c.callAsync(stubborn, s.method(stubborn, "Reset"), {},
+                  [&](ua::client::Result<ua::client::CallResult> r) {
+                      EXPECT_TRUE(r.ok() && r.value().ok());
+                      resetDone = true;
+                  });
+    std::this_thread::sleep_for(100ms);
+    EXPECT_FALSE(resetDone.load());
+    EXPECT_EQ(a.stateNumber(s, stubborn), kHalted);
+    release = true;
+    for (int i = 0; i < 2000 && !resetDone; ++i) std::this_thread::sleep_for(1ms);
+    EXPECT_TRUE(resetDone.load());
+    EXPECT_EQ(a.stateNumber(s, stubborn), kReady);
+}
+
+}  // namespace
+}  // namespace pnp::skill
