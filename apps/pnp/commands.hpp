@@ -103,6 +103,36 @@ struct DiscoverOptions {
     int pollMs = 250;
 };
 
+// `pnp skills`: the skills on the network (docs/skills.md), live or --once.
+struct SkillsOptions {
+    bool json = false;
+    bool once = false;
+    int durationMs = 0;              // 0: until Ctrl-C (--once: 2000)
+    std::vector<std::string> lds;    // LDS-MEs polled in addition to mDNS
+    std::vector<std::string> urls;   // servers examined directly (no discovery needed)
+    bool noMdns = false;
+    std::vector<std::string> mdnsInterfaces;
+    int mdnsPort = 5353;
+    std::string type;                // only skills of this type (or a subtype)
+};
+
+// `pnp skill run URL|TYPE [name=value ...]`: runs one skill and prints its transitions.
+struct SkillRunOptions {
+    std::string target;                    // opc.tcp://... or a skill type name
+    std::vector<std::string> assignments;  // Name=value
+    std::string skill;                     // the instance's name (BrowseName), if several
+    bool json = false;
+    int timeoutMs = 30000;  // the whole run
+    std::vector<std::string> lds;
+    bool noMdns = false;
+    int mdnsPort = 5353;
+    int discoverMs = 3000;  // how long to look for a skill of TYPE
+};
+// Exit code of a run that ended Failed, Aborted or timed out.
+inline constexpr int kExitSkillFailed = 3;
+
+int runSkills(const SkillsOptions& options);
+int runSkillRun(const SkillRunOptions& options);
 int runServe(const ServeOptions& options);
 int runLds(std::uint16_t port, const std::string& host, const DiscoveryOptions& options);
 int runDiscover(const DiscoverOptions& options);

@@ -56,6 +56,8 @@ std::string hostName() {
     return buf;
 }
 
+}  // namespace
+
 mdns::MdnsConfig mdnsConfig(const std::vector<std::string>& interfaces, int port, int ttl) {
     mdns::MdnsConfig c;
     c.interfaces = interfaces;
@@ -63,8 +65,6 @@ mdns::MdnsConfig mdnsConfig(const std::vector<std::string>& interfaces, int port
     c.hostTtl = c.otherTtl = static_cast<std::uint32_t>(ttl);
     return c;
 }
-
-}  // namespace
 
 void applyDiscoveryConfig(ua::server::ServerConfig& config, const DiscoveryOptions& o, bool lds) {
     if (!o.publicHost.empty())

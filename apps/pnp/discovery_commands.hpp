@@ -18,6 +18,9 @@ namespace pnp::cli {
 void applyDiscoveryConfig(ua::server::ServerConfig& config, const DiscoveryOptions& options,
                           bool lds);
 
+// mDNS on these interfaces (empty: by the default rules), UDP port, TTL of our records (s).
+mdns::MdnsConfig mdnsConfig(const std::vector<std::string>& interfaces, int port, int ttl);
+
 // Started after server.start(); the destructor unregisters, sends goodbyes and stops mDNS.
 // mDNS runs on the interfaces the server is reachable on (all for 0.0.0.0, the address's
 // interface otherwise, none for loopback) unless --mdns-interface names them.

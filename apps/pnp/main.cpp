@@ -143,6 +143,58 @@ int main(int argc, char** argv) {
         "Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM.\n"
         "Try: pnp skills --once; pnp skill run opc.tcp://127.0.0.1:4840 Delay DurationMs=500");
 
+    SkillsOptions skillsListOpts;
+    CLI::App* skillsCmd = app.add_subcommand(
+        "skills", "list the skills on the network as they come and go (skill detector)");
+    skillsCmd->add_flag("--json", skillsListOpts.json, "one JSON object per line (--once: a list)");
+    skillsCmd->add_flag("--once", skillsListOpts.once,
+                        "print the skills found within --duration (default 2000) and exit");
+    skillsCmd->add_option("--duration", skillsListOpts.durationMs, "stop after MS ms (0: Ctrl-C)");
+    skillsCmd->add_option("--type", skillsListOpts.type,
+                          "only skills of this type or a subtype (e.g. GripperSkillType)");
+    skillsCmd->add_option("--lds", skillsListOpts.lds, "also poll this LDS-ME (repeatable)");
+    skillsCmd->add_option("--url", skillsListOpts.urls,
+                          "also examine this server directly (repeatable)");
+    skillsCmd->add_flag("--no-mdns", skillsListOpts.noMdns, "no multicast: --lds / --url only");
+    skillsCmd->add_option("--mdns-interface", skillsListOpts.mdnsInterfaces,
+                          "mDNS on this interface (repeatable; default all)");
+    skillsCmd->add_option("--mdns-port", skillsListOpts.mdnsPort, "mDNS UDP port")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 65535));
+
+    SkillRunOptions skillRunOpts;
+    CLI::App* skillCmd = app.add_subcommand("skill", "use one skill (docs/skills.md)");
+    skillCmd->require_subcommand(1);
+    CLI::App* skillRun = skillCmd->add_subcommand(
+        "run", "run a skill: lock it, write the parameters, start it, print its transitions "
+               "and its result, unlock it");
+    skillRun
+        ->add_option("TARGET", skillRunOpts.target,
+                     "the server (opc.tcp://HOST:PORT) or a skill type (e.g. MoveGripperSkillType, "
+                     "found by discovery)")
+        ->required();
+    skillRun->add_option("PARAMETERS", skillRunOpts.assignments,
+                         "Name=value (typed by the parameter's DataType: 0.05, [1,2,3], "
+                         "x,y,z,a,b,c for a ThreeDFrame)");
+    skillRun->add_option("--skill", skillRunOpts.skill,
+                         "the skill's name on its component (when there are several)");
+    skillRun->add_flag("--json", skillRunOpts.json, "print one JSON object");
+    skillRun->add_option("--timeout", skillRunOpts.timeoutMs, "deadline of the whole run, ms")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 86400000));
+    skillRun->add_option("--lds", skillRunOpts.lds, "look for TYPE at this LDS-ME too");
+    skillRun->add_flag("--no-mdns", skillRunOpts.noMdns, "no multicast (with --lds)");
+    skillRun->add_option("--mdns-port", skillRunOpts.mdnsPort, "mDNS UDP port")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 65535));
+    skillRun->add_option("--discover", skillRunOpts.discoverMs,
+                         "how long to look for a skill of TYPE, ms")
+        ->capture_default_str();
+    skillRun->footer(
+        "Exit codes: 0 Completed, 1 OPC UA error, 2 usage error, 3 Failed / Aborted / timed "
+        "out (halted).\n"
+        "Example: pnp skill run opc.tcp://127.0.0.1:4840 --skill MoveGripper Width=0.02");
+
     CLI::App* ua =
         app.add_subcommand("ua", "OPC UA tools: a demo server and a command-line client");
     ua->require_subcommand(1);
@@ -267,6 +319,8 @@ int main(int argc, char** argv) {
     try {
         if (*serve) return runServe(serveOpts);
         if (*demoSkills) return runServe(skillsOpts);
+        if (*skillsCmd) return runSkills(skillsListOpts);
+        if (*skillRun) return runSkillRun(skillRunOpts);
         if (*lds) return runLds(ldsPort, ldsHost, ldsOpts);
         if (*discover) return runDiscover(discoverOpts);
         if (*endpoints) return runEndpoints(epOpts);

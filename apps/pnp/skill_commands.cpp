@@ -1,0 +1,245 @@
+// `pnp skills` and `pnp skill run` (docs/skills.md): the skill detector and the generic skill
+// client on the command line.
+#include <signal.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <iostream>
+#include <mutex>
+
+#include "commands.hpp"
+#include "discovery_commands.hpp"
+#include "output.hpp"
+#include "skill/client/generic_client.hpp"
+#include "skill/detector/skill_detector.hpp"
+#include "value_text.hpp"
+
+namespace pnp::cli {
+
+namespace {
+
+using skill::detector::DetectedSkill;
+using skill::detector::SkillDetector;
+
+Json toJson(const DetectedSkill& s) {
+    Json chain = Json::array();
+    for (const auto& t : s.typeChain) chain.push_back(t.name);
+    return {{"type", s.type.name},      {"typeUri", s.type.uri},
+            {"name", s.name},           {"url", s.endpointUrl},
+            {"node", s.nodeText},       {"component", s.controllerName},
+            {"application", s.componentName},
+            {"applicationUri", s.componentUri},
+            {"typeChain", chain}};
+}
+
+skill::ModelNode typeOrThrow(const std::string& name) {
+    if (auto t = skill::typeByName(name)) return *t;
+    std::string known;
+    for (const auto& t : skill::knownTypes()) known += (known.empty() ? "" : ", ") + std::string(t.name);
+    throw UsageError("unknown skill type " + name + " (known: " + known + ")");
+}
+
+// mDNS unless --no-mdns; without it (or when it cannot start) only LDS-MEs / URLs are used.
+std::unique_ptr<mdns::Mdns> startMdns(bool noMdns, const std::vector<std::string>& interfaces,
+                                      int port, bool haveOtherSources, const char* who) {
+    if (noMdns) return nullptr;
+    try {
+        auto m = std::make_unique<mdns::Mdns>(mdnsConfig(interfaces, port, 120));
+        m->start();
+        return m;
+    } catch (const std::exception& e) {
+        if (!haveOtherSources) throw;
+        std::cerr << who << ": no mDNS (" << e.what() << ")" << std::endl;
+        return nullptr;
+    }
+}
+
+void waitForStop(const sigset_t& stopSignals, int durationMs) {
+    if (durationMs > 0) {
+        timespec ts{durationMs / 1000, (durationMs % 1000) * 1'000'000L};
+        while (sigtimedwait(&stopSignals, nullptr, &ts) < 0 && errno == EINTR) {
+        }
+    } else {
+        int sig = 0;
+        while (sigwait(&stopSignals, &sig) != 0) {
+        }
+    }
+}
+
+std::string stateName(skill::ProgramState s) { return std::string(skill::toString(s)); }
+
+}  // namespace
+
+int runSkills(const SkillsOptions& o) {
+    const sigset_t stopSignals = blockStopSignals();
+    std::optional<skill::ModelNode> only;
+    if (!o.type.empty()) only = typeOrThrow(o.type);
+    if (o.noMdns && o.lds.empty() && o.urls.empty())
+        throw UsageError("--no-mdns needs an --lds or --url");
+    std::unique_ptr<mdns::Mdns> mdns;
+    try {
+        mdns = startMdns(o.noMdns, o.mdnsInterfaces, o.mdnsPort, !o.lds.empty() || !o.urls.empty(),
+                         "pnp skills");
+    } catch (const std::exception& e) {
+        std::cerr << "error: mDNS: " << e.what() << "\n";
+        return kExitUaError;
+    }
+    skill::detector::DetectorConfig config;
+    config.watcher.ldsUrls = o.lds;
+    config.useDiscovery = mdns != nullptr || !o.lds.empty();
+    SkillDetector detector(mdns.get(), config);
+    std::mutex printMutex;
+    const auto t0 = std::chrono::steady_clock::now();
+    detector.onChange([&](const DetectedSkill& s, bool added) {
+        if (o.once || (only && !s.isA(*only))) return;
+        std::lock_guard lock(printMutex);
+        if (o.json) {
+            Json j = toJson(s);
+            j["event"] = added ? "added" : "removed";
+            j["ms"] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                          .count();
+            std::cout << j.dump() << std::endl;
+        } else {
+            std::cout << (added ? "+ " : "- ") << s.type.name << "  " << s.controllerName << "/"
+                      << s.name << "  " << s.endpointUrl << "  " << s.nodeText << std::endl;
+        }
+    });
+    detector.start();
+    for (const auto& url : o.urls) detector.addServer(url);
+    waitForStop(stopSignals, o.durationMs > 0 ? o.durationMs : (o.once ? 2000 : 0));
+    auto skills = only ? detector.find(*only) : detector.all();
+    detector.stop();
+    if (o.once) {
+        std::sort(skills.begin(), skills.end(), [](const auto& a, const auto& b) {
+            return std::tie(a.endpointUrl, a.controllerName, a.name) <
+                   std::tie(b.endpointUrl, b.controllerName, b.name);
+        });
+        if (o.json) {
+            Json arr = Json::array();
+            for (const auto& s : skills) arr.push_back(toJson(s));
+            std::cout << arr.dump(2) << std::endl;
+        } else {
+            Table t({"TYPE", "SKILL", "COMPONENT", "URL", "NODE"});
+            for (const auto& s : skills)
+                t.add({s.type.name, s.name, s.controllerName, s.endpointUrl, s.nodeText});
+            t.print(std::cout);
+        }
+    }
+    return kExitOk;
+}
+
+int runSkillRun(const SkillRunOptions& o) {
+    using namespace std::chrono;
+    const bool byUrl = o.target.starts_with("opc.tcp://");
+    std::optional<skill::ModelNode> type;
+    if (!byUrl) type = typeOrThrow(o.target);
+    const auto deadline = steady_clock::now() + milliseconds(o.timeoutMs);
+
+    // Find the skill: on the given server, or by type on the network.
+    std::unique_ptr<mdns::Mdns> mdns;
+    if (!byUrl) {
+        try {
+            mdns = startMdns(o.noMdns, {}, o.mdnsPort, !o.lds.empty(), "pnp skill run");
+        } catch (const std::exception& e) {
+            std::cerr << "error: mDNS: " << e.what() << "\n";
+            return kExitUaError;
+        }
+        if (!mdns && o.lds.empty()) throw UsageError("--no-mdns needs an --lds URL");
+    }
+    skill::detector::DetectorConfig config;
+    config.watcher.ldsUrls = o.lds;
+    config.useDiscovery = !byUrl;
+    SkillDetector detector(mdns.get(), config);
+    detector.start();
+    if (byUrl) detector.addServer(o.target);
+    auto matching = [&](const SkillDetector& d) {
+        std::vector<DetectedSkill> out;
+        for (auto& s : type ? d.find(*type) : d.all())
+            if (o.skill.empty() || s.name == o.skill) out.push_back(std::move(s));
+        return out;
+    };
+    detector.waitUntil(
+        [&](const SkillDetector& d) {
+            if (!matching(d).empty()) return true;
+            if (!byUrl) return false;
+            auto servers = d.servers();
+            return !servers.empty() &&
+                   servers.front().status != skill::detector::ServerState::Status::Examining;
+        },
+        milliseconds(byUrl ? o.timeoutMs : std::min(o.discoverMs, o.timeoutMs)));
+    auto candidates = matching(detector);
+    auto servers = detector.servers();
+    detector.stop();
+    if (candidates.empty()) {
+        std::string why = byUrl ? "no skill" + (o.skill.empty() ? "" : " named " + o.skill) +
+                                      " on " + o.target
+                                : "no skill of type " + std::string(type->name) + " found";
+        if (byUrl && !servers.empty() && !servers.front().error.empty())
+            why += " (" + servers.front().error + ")";
+        std::cerr << "error: " << why << "\n";
+        return kExitUaError;
+    }
+    if (byUrl && candidates.size() > 1 && o.skill.empty()) {
+        std::string names;
+        for (const auto& s : candidates) names += (names.empty() ? "" : ", ") + s.name;
+        throw UsageError("the server has several skills (" + names + "): choose one with --skill");
+    }
+    const DetectedSkill target = candidates.front();
+
+    auto connection = std::make_shared<ua::client::Client>();
+    connection->connect(target.endpointUrl, ua::client::Anonymous{}, deadline);
+    skill::client::GenericSkillClient skill(connection, target.node, deadline);
+    skill::client::NamedValues params;
+    try {
+        params = skill.parse(o.assignments);
+    } catch (const ua::client::Error& e) {
+        throw UsageError(e.what());
+    }
+    if (!o.json)
+        std::cout << "running " << target.controllerName << "/" << target.name << " ("
+                  << target.type.name << ") on " << target.endpointUrl << std::endl;
+    skill::client::RunResult r = skill.run(params, deadline);
+
+    const bool ok = r.result == skill::SkillResult::Completed && !r.timedOut;
+    if (o.json) {
+        Json transitions = Json::array();
+        for (const auto& t : r.transitions) {
+            Json j = {{"number", t.number},
+                      {"name", t.name},
+                      {"from", stateName(t.from)},
+                      {"to", stateName(t.to)},
+                      {"time", dateTimeText(t.time)}};
+            if (!t.message.empty()) j["message"] = t.message;
+            if (!t.intermediateResult.isEmpty())
+                j["intermediateResult"] = toJson(t.intermediateResult);
+            transitions.push_back(j);
+        }
+        Json results = Json::object();
+        for (const auto& [name, v] : r.finalResult.values) results[name] = toJson(v);
+        Json j = toJson(target);
+        j["result"] = std::string(skill::toString(r.result));
+        j["message"] = r.message;
+        j["timedOut"] = r.timedOut;
+        j["transitions"] = transitions;
+        j["finalResultData"] = results;
+        std::cout << j.dump(2) << std::endl;
+    } else {
+        for (const auto& t : r.transitions) {
+            std::cout << "  " << dateTimeText(t.time) << "  " << stateName(t.from) << " -> "
+                      << stateName(t.to) << "  (" << t.number << " " << t.name << ")";
+            if (!t.intermediateResult.isEmpty())
+                std::cout << "  progress " << toText(t.intermediateResult);
+            if (!t.message.empty() && t.to == skill::ProgramState::Halted)
+                std::cout << "  " << t.message;
+            std::cout << std::endl;
+        }
+        std::cout << (r.timedOut ? "TimedOut" : std::string(skill::toString(r.result)));
+        if (!ok && !r.message.empty()) std::cout << ": " << r.message;
+        std::cout << std::endl;
+        for (const auto& [name, v] : r.finalResult.values)
+            std::cout << "  " << name << " = " << toText(v) << std::endl;
+    }
+    return ok ? kExitOk : kExitSkillFailed;
+}
+
+}  // namespace pnp::cli
