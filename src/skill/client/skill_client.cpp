@@ -89,6 +89,15 @@ Transition transitionOf(ua::client::EventFields& e) {
     t.number = integerOf<ua::UInt32>(e.get("Transition/Number")).value_or(0);
     t.from = stateOf(e.get("FromState/Number"), e.get("FromState/Id"));
     t.to = stateOf(e.get("ToState/Number"), e.get("ToState/Id"));
+    // A server that sends only the transition's number: its states are fixed by Part 10.
+    static constexpr ProgramState H = ProgramState::Halted, R = ProgramState::Ready,
+                                  U = ProgramState::Running, S = ProgramState::Suspended;
+    static constexpr std::pair<ProgramState, ProgramState> kByNumber[] = {
+        {H, R}, {R, U}, {U, H}, {U, R}, {U, S}, {S, U}, {S, H}, {S, R}, {R, H}};
+    if (t.number >= 1 && t.number <= 9) {
+        if (t.from == ProgramState::Unknown) t.from = kByNumber[t.number - 1].first;
+        if (t.to == ProgramState::Unknown) t.to = kByNumber[t.number - 1].second;
+    }
     if (const auto* v = e.get("IntermediateResult")) t.intermediateResult = *v;
     if (const auto* v = e.get("Time"))
         if (const auto* d = v->scalar<ua::DateTime>()) t.time = *d;
@@ -387,8 +396,8 @@ bool SkillClient::lock(std::string_view context, Deadline deadline) {
     const Clock::time_point end = resolve(deadline);
     ua::Int32 r = callLock(initLock_, {ua::Variant(ua::String(context))}, "InitLock", end);
     if (r != lock_status::Ok) return false;
-    // The server's lock time, so that run() renews in time.
-    if (!remainingLockTime_.isNull()) {
+    // The server's lock time (once), so that run() renews in time.
+    if (!remainingLockTime_.isNull() && !lockTimeKnown_.exchange(true)) {
         try {
             ua::Variant v = client_->readValue(remainingLockTime_, end);
             if (const auto* ms = v.scalar<ua::Double>(); ms != nullptr && *ms > 0)
@@ -535,7 +544,16 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
         std::lock_guard l(queue_->mutex);
         cursor = queue_->end();
     }
-    start(end);
+    try {
+        start(end);
+    } catch (const Error& e) {
+        // The Start may have been executed without our seeing the response.
+        if (e.status() == status::BadTimeout) try {
+                halt(cleanup());
+            } catch (const Error&) {
+            }
+        throw;
+    }
 
     // Wait for Running and then Ready / Halted. Renew the lock every third of its time;
     // after a quiet second, read the state in case an event was lost (we hold the lock and

@@ -197,6 +197,7 @@ class SkillClient {
     ua::NodeId resultNode_, messageNode_;
     std::vector<std::pair<std::string, ua::NodeId>> resultValues_;
     std::atomic<std::chrono::milliseconds> lockTime_;
+    std::atomic<bool> lockTimeKnown_{false};
 
     std::mutex subscribeMutex_;  // creation of the subscription and its item
     ua::client::Subscription subscription_;

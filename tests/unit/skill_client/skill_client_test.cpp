@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <future>
+#include <optional>
 #include <memory>
 #include <mutex>
 #include <stop_token>
@@ -285,6 +287,26 @@ TEST(SkillClient, RunCancelled) {
     EXPECT_FALSE(r.timedOut);
     EXPECT_EQ(r.result, SkillResult::Aborted);
     EXPECT_EQ(skill.state(), ProgramState::Halted);
+}
+
+TEST(SkillClient, SuspendAndResumeDuringARun) {
+    Cell cell;
+    SkillClient skill(cell.a, cell.delay, 5s);
+    skill.subscribeTransitions();
+    std::future<RunResult> run = std::async(std::launch::async, [&] {
+        return skill.run({{"DurationMs", 300.0}}, 10s);
+    });
+    std::optional<Transition> t = skill.nextTransition(5s);
+    ASSERT_TRUE(t);
+    EXPECT_EQ(t->number, 2u);
+    skill.suspend();  // the same session holds the lock
+    EXPECT_EQ(skill.state(), ProgramState::Suspended);
+    std::this_thread::sleep_for(50ms);
+    skill.resume();
+    ASSERT_EQ(run.wait_for(10s), std::future_status::ready);
+    RunResult r = run.get();
+    EXPECT_EQ(r.result, SkillResult::Completed) << r.message;
+    EXPECT_EQ(numbersOf(r.transitions), (std::vector<ua::UInt32>{2, 5, 6, 4}));
 }
 
 TEST(SkillClient, RunWaitsForAnotherClientsLock) {
