@@ -419,40 +419,6 @@ struct ValueChangeRun {
     double serverSetValueUs = -1;  // median, from the server's log; -1: not reported
 };
 
-// Keeps CPUs from going idle while it lives: one thread per CPU spins under SCHED_IDLE, so it
-// runs only when nothing else wants that CPU and yields it at once to any other thread. An
-// idle vCPU is halted by the hypervisor, and waking it costs tens of µs before any code of
-// ours or of the kernel's TCP runs (bench/README.md (e)); a controller core run with
-// `idle=poll` or with its C-states disabled is in the state this produces.
-class BusyCores {
-  public:
-    explicit BusyCores(std::vector<int> cpus) {
-        for (int cpu : cpus)
-            threads_.emplace_back([this, cpu] {
-                cpu_set_t set;
-                CPU_ZERO(&set);
-                CPU_SET(cpu, &set);
-                pthread_setaffinity_np(pthread_self(), sizeof set, &set);
-                sched_param p{};
-                pthread_setschedparam(pthread_self(), SCHED_IDLE, &p);
-                // No pause instruction: a hypervisor may take a pause loop as a spinning lock
-                // and deschedule the vCPU, which is what this is to prevent.
-                while (!stop_.load(std::memory_order_relaxed)) {
-                }
-            });
-    }
-    ~BusyCores() {
-        stop_ = true;
-        for (auto& t : threads_) t.join();
-    }
-    BusyCores(const BusyCores&) = delete;
-    BusyCores& operator=(const BusyCores&) = delete;
-
-  private:
-    std::atomic<bool> stop_{false};
-    std::vector<std::thread> threads_;
-};
-
 // The CPUs section (e) runs on: the pinned ones, or all of them when not pinned.
 std::vector<int> benchmarkCpus(const Options& o) {
     std::vector<int> cpus;

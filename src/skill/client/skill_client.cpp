@@ -83,6 +83,24 @@ const std::vector<std::string> kEventSelect = {
     "ToState/Number", "ToState/Id",      "IntermediateResult", "Time",
     "Message",      "Severity",          "SourceNode"};
 
+}  // namespace
+
+Transition transitionFromNumber(ua::UInt32 number) {
+    static constexpr ProgramState H = ProgramState::Halted, R = ProgramState::Ready,
+                                  U = ProgramState::Running, S = ProgramState::Suspended;
+    static constexpr std::pair<ProgramState, ProgramState> kByNumber[] = {
+        {H, R}, {R, U}, {U, H}, {U, R}, {U, S}, {S, U}, {S, H}, {S, R}, {R, H}};
+    Transition t;
+    t.number = number;
+    if (number < 1 || number > 9) return t;
+    t.from = kByNumber[number - 1].first;
+    t.to = kByNumber[number - 1].second;
+    t.name = std::string(toString(t.from)) + "To" + std::string(toString(t.to));
+    return t;
+}
+
+namespace {
+
 Transition transitionOf(ua::client::EventFields& e) {
     Transition t;
     if (const auto* v = e.get("Transition")) t.name = textOf(*v);
@@ -90,13 +108,11 @@ Transition transitionOf(ua::client::EventFields& e) {
     t.from = stateOf(e.get("FromState/Number"), e.get("FromState/Id"));
     t.to = stateOf(e.get("ToState/Number"), e.get("ToState/Id"));
     // A server that sends only the transition's number: its states are fixed by Part 10.
-    static constexpr ProgramState H = ProgramState::Halted, R = ProgramState::Ready,
-                                  U = ProgramState::Running, S = ProgramState::Suspended;
-    static constexpr std::pair<ProgramState, ProgramState> kByNumber[] = {
-        {H, R}, {R, U}, {U, H}, {U, R}, {U, S}, {S, U}, {S, H}, {S, R}, {R, H}};
     if (t.number >= 1 && t.number <= 9) {
-        if (t.from == ProgramState::Unknown) t.from = kByNumber[t.number - 1].first;
-        if (t.to == ProgramState::Unknown) t.to = kByNumber[t.number - 1].second;
+        const Transition byNumber = transitionFromNumber(t.number);
+        if (t.from == ProgramState::Unknown) t.from = byNumber.from;
+        if (t.to == ProgramState::Unknown) t.to = byNumber.to;
+        if (t.name.empty()) t.name = byNumber.name;
     }
     if (const auto* v = e.get("IntermediateResult")) t.intermediateResult = *v;
     if (const auto* v = e.get("Time"))
@@ -168,7 +184,7 @@ void SkillClient::discover(Deadline deadline) {
     type.node = local(top[0].references[0].nodeId);
     type.name = top[0].references[0].browseName.name;
 
-    ua::NodeId parameterSet, lock, finalData, currentState;
+    ua::NodeId parameterSet, lock, finalData, currentState, lastTransition;
     for (const auto& ref : top[1].references) {
         const std::string& n = ref.browseName.name;
         const ua::NodeId id = local(ref.nodeId);
@@ -186,6 +202,8 @@ void SkillClient::discover(Deadline deadline) {
             finalData = id;
         } else if (n == "CurrentState") {
             currentState = id;
+        } else if (n == "LastTransition") {
+            lastTransition = id;
         }
     }
     lockNode_ = lock;
@@ -198,7 +216,8 @@ void SkillClient::discover(Deadline deadline) {
          browseOf(orSelf(finalData), ua::ns0::HierarchicalReferences),
          browseOf(orSelf(lock), ua::ns0::HierarchicalReferences),
          browseOf(orSelf(currentState), ua::ns0::HasProperty),
-         browseOf(type.node, ua::ns0::HasSubtype, ua::BrowseDirection::Inverse)},
+         browseOf(type.node, ua::ns0::HasSubtype, ua::BrowseDirection::Inverse),
+         browseOf(orSelf(lastTransition), ua::ns0::HasProperty)},
         0, deadline);
     if (!parameterSet.isNull())
         for (const auto& ref : second[0].references)
@@ -229,6 +248,12 @@ void SkillClient::discover(Deadline deadline) {
         for (const auto& ref : second[3].references) {
             if (ref.browseName.name == "Number") stateNumber_ = local(ref.nodeId);
             if (ref.browseName.name == "Id") stateId_ = local(ref.nodeId);
+        }
+
+    if (!lastTransition.isNull() && second.size() > 5)
+        for (const auto& ref : second[5].references) {
+            if (ref.browseName.name == "Number") lastTransitionNumber_ = local(ref.nodeId);
+            if (ref.browseName.name == "TransitionTime") lastTransitionTime_ = local(ref.nodeId);
         }
 
     // The supertype chain up to SkillType (usually 1 to 4 levels).
@@ -422,11 +447,36 @@ bool SkillClient::breakLock(Deadline d) {
 // ---- results and transitions ---------------------------------------------------------------
 
 FinalResult SkillClient::finalResult(Deadline deadline) {
+    return stateAndResult(false, deadline).result;
+}
+
+SkillClient::Polled SkillClient::stateAndResult(bool withState, Deadline deadline) {
     std::vector<ua::ReadValueId> reads{readOf(resultNode_.isNull() ? node_ : resultNode_),
                                        readOf(messageNode_.isNull() ? node_ : messageNode_)};
     for (const auto& [name, node] : resultValues_) reads.push_back(readOf(node));
+    const ua::NodeId& stateNode = !stateNumber_.isNull() ? stateNumber_ : stateId_;
+    const std::size_t results = reads.size();
+    if (withState) {
+        reads.push_back(readOf(stateNode.isNull() ? node_ : stateNode));
+        reads.push_back(readOf(lastTransitionNumber_.isNull() ? node_ : lastTransitionNumber_));
+        reads.push_back(readOf(lastTransitionTime_.isNull() ? node_ : lastTransitionTime_));
+    }
     auto values = client_->read(std::move(reads), deadline);
-    FinalResult out;
+    Polled polled;
+    if (withState && values.size() == results + 3) {
+        ua::Variant v = values[results].value.value_or(ua::Variant());
+        if (!stateNode.isNull())
+            polled.state = stateNumber_.isNull() ? stateOf(nullptr, &v) : stateOf(&v, nullptr);
+        if (!lastTransitionNumber_.isNull() && values[results + 1].value)
+            polled.lastTransition =
+                integerOf<ua::UInt32>(&*values[results + 1].value).value_or(0);
+        if (!lastTransitionTime_.isNull() && values[results + 2].value)
+            if (const auto* t = values[results + 2].value->scalar<ua::DateTime>())
+                polled.lastTransitionTime = *t;
+        values.resize(results);
+    }
+    Polled& both = polled;
+    FinalResult& out = both.result;
     if (!resultNode_.isNull() && values.size() > 0 && values[0].value)
         if (auto n = integerOf<ua::Int32>(&*values[0].value))
             out.result = static_cast<SkillResult>(*n);
@@ -435,7 +485,7 @@ FinalResult SkillClient::finalResult(Deadline deadline) {
     for (std::size_t i = 0; i < resultValues_.size() && i + 2 < values.size(); ++i)
         out.values.emplace_back(resultValues_[i].first,
                                 values[i + 2].value.value_or(ua::Variant()));
-    return out;
+    return both;
 }
 
 void SkillClient::subscribeTransitions(Deadline deadline) {
@@ -537,31 +587,99 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
         }
     } unlock{*this, cleanup};
 
-    if (state(end) == ProgramState::Halted) reset(end);
     setParameters(params, end);
-    std::uint64_t cursor;
-    {
-        std::lock_guard l(queue_->mutex);
-        cursor = queue_->end();
-    }
-    try {
-        start(end);
-    } catch (const Error& e) {
-        // The Start may have been executed without our seeing the response.
-        if (e.status() == status::BadTimeout) try {
-                halt(cleanup());
-            } catch (const Error&) {
-            }
-        throw;
+    std::uint64_t cursor = 0;
+    // Start; a Halted skill (a failed or halted run before) is Reset first and started again.
+    for (int attempt = 0;; ++attempt) {
+        {
+            std::lock_guard l(queue_->mutex);
+            cursor = queue_->end();
+        }
+        try {
+            start(end);
+            break;
+        } catch (const Error& e) {
+            // The Start may have been executed without our seeing the response.
+            if (e.status() == status::BadTimeout) try {
+                    halt(cleanup());
+                } catch (const Error&) {
+                }
+            const bool refused = e.status() == status::BadNotExecutable ||
+                                 e.status() == status::BadInvalidState;
+            if (attempt > 0 || !refused || state(end) != ProgramState::Halted) throw;
+            reset(end);
+        }
     }
 
-    // Wait for Running and then Ready / Halted. Renew the lock every third of its time;
-    // after a quiet second, read the state in case an event was lost (we hold the lock and
-    // Start succeeded, so Ready / Halted means this run ended).
+    // Wait for Running and then Ready / Halted. The last event of a run that ends within
+    // the subscription's publishing interval after the Running one may only be delivered at
+    // the next interval (the server publishes once per interval), so meanwhile the end is
+    // also polled: one Read of the state and the final result right after Start, then at
+    // doubling gaps until the publishing interval has passed (a handful of Reads at most),
+    // then once a second in case an event was lost. (Start's Good means Ready -> Running
+    // happened and the final result was reset to None; we hold the lock, so no other run
+    // came between: Ready / Halted with a result means this run ended.)
+    // The lock is renewed every third of its time.
     const auto renewEvery = std::max<std::chrono::milliseconds>(lockTime() / 3, 10ms);
-    auto nextRenew = Clock::now() + renewEvery;
-    auto nextPoll = Clock::now() + 1s;
-    bool running = false, ended = false, aborted = false;
+    const auto started = Clock::now();
+    const ua::DateTime startedAt = ua::DateTime::now();
+    const auto fastPollUntil =
+        started + std::chrono::microseconds(static_cast<long>(options_.publishingInterval * 1000));
+    auto pollGap = std::chrono::microseconds(50);
+    auto nextRenew = started + renewEvery;
+    auto nextPoll = started;
+    bool running = false, ended = false, aborted = false, polledEnd = false;
+    Polled last;
+    auto poll = [&] {
+        Polled p = stateAndResult(true, end);
+        if ((p.state == ProgramState::Ready || p.state == ProgramState::Halted) &&
+            p.result.result != SkillResult::None) {
+            polledEnd = ended = true;
+            out.finalResult = p.result;
+            last = std::move(p);
+        }
+        const auto now = Clock::now();
+        if (now < fastPollUntil) {
+            nextPoll = now + pollGap;
+            pollGap *= 2;
+        } else {
+            nextPoll = now + 1s;
+        }
+    };
+    // After a polled end: the events of this run that have arrived (the Running one, usually),
+    // and the last transition as LastTransition says when its event is still on its way.
+    auto collectArrived = [&] {
+        {
+            std::lock_guard l(queue_->mutex);
+            auto& q = *queue_;
+            for (cursor = std::max(cursor, q.first); cursor < q.end(); ++cursor) {
+                const Transition& t = q.items[cursor - q.first];
+                if (t.to == ProgramState::Running && t.from == ProgramState::Ready) running = true;
+                if (running) out.transitions.push_back(t);  // not the late event of a Reset
+            }
+        }
+        if (!running) {  // held back by the publishing interval too (e.g. after a Reset)
+            Transition t = transitionFromNumber(2);
+            t.time = startedAt;  // our clock: when Start returned
+            t.source = node_;
+            t.polled = true;
+            out.transitions.push_back(std::move(t));
+            running = true;
+        }
+        const bool endSeen = !out.transitions.empty() &&
+                             (out.transitions.back().to == ProgramState::Ready ||
+                              out.transitions.back().to == ProgramState::Halted);
+        if (!endSeen && last.lastTransition != 0) {
+            Transition t = transitionFromNumber(last.lastTransition);
+            t.time = last.lastTransitionTime;
+            t.source = node_;
+            if (t.to == ProgramState::Halted) t.message = out.finalResult.message;
+            t.polled = true;
+            out.transitions.push_back(std::move(t));
+        }
+    };
+    poll();
+    if (polledEnd) collectArrived();
     while (!ended) {
         std::vector<Transition> fresh;
         {
@@ -583,7 +701,7 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
         }
         if (ended) break;
         const auto now = Clock::now();
-        if (!fresh.empty()) nextPoll = now + 1s;
+        if (!fresh.empty() && now >= fastPollUntil) nextPoll = now + 1s;
         if (cancel.stop_requested() || now >= end) {
             aborted = true;
             break;
@@ -593,9 +711,8 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
             nextRenew = now + renewEvery;
         }
         if (now >= nextPoll) {
-            const ProgramState s = state(end);
-            ended = s == ProgramState::Ready || s == ProgramState::Halted;
-            nextPoll = now + 1s;
+            poll();
+            if (polledEnd) collectArrived();
         }
     }
 
@@ -621,7 +738,7 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
             }
         }
     }
-    out.finalResult = finalResult(cleanup());
+    if (!polledEnd) out.finalResult = finalResult(cleanup());
     out.result = out.finalResult.result;
     out.message = out.finalResult.message;
     if (aborted && out.result != SkillResult::Completed && out.result != SkillResult::Failed) {

@@ -76,13 +76,23 @@ struct Transition {
     std::string message;
     ua::UInt16 severity = 0;
     ua::NodeId source;
+    // Not from an event: run() saw the run end by a Read (CurrentState, LastTransition)
+    // before this transition's event arrived; the event still goes to onTransition().
+    bool polled = false;
 };
+
+// The transition of ProgramStateMachineType with this number (1 HaltedToReady ... 9
+// ReadyToHalted): states and name; number 0 / unknown: states Unknown.
+Transition transitionFromNumber(ua::UInt32 number);
 
 struct RunResult {
     SkillResult result = SkillResult::None;
     std::string message;
     FinalResult finalResult;
-    std::vector<Transition> transitions;  // those of this run, in order
+    // Those of this run, in order. A run that ends within the subscription's publishing
+    // interval is seen ended by a Read before its last event arrives: that transition is
+    // then built from LastTransition (Transition::polled; onTransition() still gets the event).
+    std::vector<Transition> transitions;
     bool timedOut = false;                // the deadline passed: the run was halted
 };
 
@@ -178,6 +188,15 @@ class SkillClient {
   private:
     struct Queue;
     void discover(Deadline deadline);
+    // FinalResultData (and CurrentState, LastTransition/Number and /TransitionTime when
+    // withState) in one Read.
+    struct Polled {
+        ProgramState state = ProgramState::Unknown;
+        ua::UInt32 lastTransition = 0;
+        ua::DateTime lastTransitionTime;
+        FinalResult result;
+    };
+    Polled stateAndResult(bool withState, Deadline deadline);
     ua::client::CallResult callMethod(const ua::NodeId& object, const ua::NodeId& method,
                                       std::vector<ua::Variant> inputs, std::string_view what,
                                       Deadline deadline);
@@ -194,6 +213,7 @@ class SkillClient {
     ua::NodeId start_, suspend_, resume_, halt_, reset_;
     ua::NodeId lockNode_, initLock_, renewLock_, exitLock_, breakLock_, remainingLockTime_;
     ua::NodeId stateNumber_, stateId_;  // CurrentState/Number (preferred) and /Id
+    ua::NodeId lastTransitionNumber_, lastTransitionTime_;
     ua::NodeId resultNode_, messageNode_;
     std::vector<std::pair<std::string, ua::NodeId>> resultValues_;
     std::atomic<std::chrono::milliseconds> lockTime_;

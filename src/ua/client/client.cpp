@@ -184,6 +184,10 @@ class Client::Impl {
     bool stopRequested = false;
     int wakeFd = -1;
     std::atomic<std::thread::id> backgroundThreadId{};  // while backgroundLoop() runs
+    // Blocking calls in progress (they read the socket themselves): the background thread
+    // then leaves the socket's data alone and does not queue on the lock they hold.
+    std::atomic<int> blockingCalls{0};
+    std::atomic<bool> asyncPending{false};  // as last seen by the background thread
 
     // ---- helpers (all with the mutex held) ----------------------------------------------
 
@@ -682,6 +686,12 @@ class Client::Impl {
         short revents = 0;  // of the socket, from the last poll()
         std::uint64_t watched = 0;
         for (;;) {
+            // A blocking call reads the socket (and dispatches what it finds): wait for it to
+            // end (it wakes us) without touching the socket's data or its lock.
+            if (blockingCalls.load() > 0) {
+                revents = waitForEvents(-1, 0, Clock::now() + std::chrono::milliseconds(50));
+                continue;
+            }
             Completions done(completions);
             Clock::time_point until;
             int fd = -1;
@@ -694,6 +704,7 @@ class Client::Impl {
                 if (conn) {
                     fd = conn->nativeHandle();
                     events = pending.empty() ? POLLRDHUP : (POLLIN | POLLRDHUP);
+                    asyncPending = !pending.empty();
                     watched = generation;
                 }
             }
@@ -833,6 +844,15 @@ ClientStats Client::stats() const {
 void Client::roundTrip(EncodeRef encode, DecodeRef decode, bool idempotent, Deadline deadline,
                        std::string_view service) {
     Impl& s = *impl_;
+    // Declared first, so it ends after the lock is released: the background thread, which
+    // kept off the socket meanwhile, watches it again for pending async responses.
+    struct Blocking {
+        Impl& s;
+        explicit Blocking(Impl& i) : s(i) { s.blockingCalls.fetch_add(1); }
+        ~Blocking() {
+            if (s.blockingCalls.fetch_sub(1) == 1 && s.asyncPending.load()) s.wake();
+        }
+    } blocking(s);
     Completions done(s.completions);  // run after the lock is released
     std::lock_guard lock(s.mutex);
     s.resolvedAt = Clock::now();

@@ -380,12 +380,16 @@ std::size_t AddressSpace::Impl::bytesUsed() const {
 }
 
 // ---- ContinuationPointStore -------------------------------------------------------------------
-ContinuationPointStore::ContinuationPointStore(std::size_t maxPoints) : max_(maxPoints) {
-    std::random_device rd;
-    next_ = (std::uint64_t(rd()) << 32) ^ rd();
-}
+// The seed is drawn at the first continuation point, not here: stores are also made for
+// internal one-off browses (every fired event resolves its notifiers with one), and
+// std::random_device costs a system call or more.
+ContinuationPointStore::ContinuationPointStore(std::size_t maxPoints) : max_(maxPoints), next_(0) {}
 
 const ByteString& ContinuationPointStore::add(Point p) {
+    if (next_ == 0) {
+        std::random_device rd;
+        next_ = ((std::uint64_t(rd()) << 32) ^ rd()) | 1u;
+    }
     next_ += 0x9E3779B97F4A7C15ull;  // unpredictable enough, never repeats within 2^64 calls
     std::uint64_t v = next_;
     p.id = ByteString(reinterpret_cast<const Byte*>(&v), sizeof v);

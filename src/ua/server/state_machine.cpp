@@ -304,6 +304,16 @@ struct FiniteStateMachine::Impl {
     // Writes the current state (and, after a transition, the last transition) into the
     // address space.
     void publish(const DateTime& now) {
+        // Executable first: a client that reads the new CurrentState and calls a method at
+        // once must find it executable (the handlers check the machine's own state, which
+        // changed before any of this).
+        if (options.trackExecutable)
+            for (const Method& m : methods) {
+                if (m.node.isNull()) continue;
+                const bool on = std::find(m.fromStates.begin(), m.fromStates.end(), current) !=
+                                m.fromStates.end();
+                as.setExecutable(m.node, on);
+            }
         const State& s = states[current];
         set(currentStateId, Variant(s.node));
         set(currentStateNumber, Variant(s.number));
@@ -325,13 +335,6 @@ struct FiniteStateMachine::Impl {
         }
         set(availableStates, Variant(std::move(toStates)));
         set(availableTransitions, Variant(std::move(possible)));
-        if (!options.trackExecutable) return;
-        for (const Method& m : methods) {
-            if (m.node.isNull()) continue;
-            const bool on =
-                std::find(m.fromStates.begin(), m.fromStates.end(), current) != m.fromStates.end();
-            as.setExecutable(m.node, on);
-        }
     }
 
     // The transition named `name` (byCause: caused by method `name`) from the current state.
