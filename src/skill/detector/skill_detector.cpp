@@ -33,6 +33,8 @@ namespace {
 
 constexpr ua::UInt32 kResultAll = 0x3F;
 constexpr ua::UInt32 kResultBrowseName = 0x08 | 0x20;  // BrowseName + TypeDefinition
+// Below the MaxNodesPerBrowse of common servers (ours: 10000).
+constexpr std::size_t kMaxPerBrowse = 500;
 
 // The outcome of one examination of a server.
 struct Examination {
@@ -126,8 +128,17 @@ class Examiner {
 
     ua::client::Deadline deadline() const { return cfg_.requestTimeout; }
     void send(Batch& b) {
-        auto results = c_.browse(b.descriptions, 0, deadline());
-        ++roundTrips;
+        // Chunks, for servers with a low MaxNodesPerBrowse (one request in the usual case).
+        std::vector<ua::BrowseResult> results;
+        for (std::size_t at = 0; at < b.descriptions.size(); at += kMaxPerBrowse) {
+            std::size_t end = std::min(b.descriptions.size(), at + kMaxPerBrowse);
+            std::vector<ua::BrowseDescription> chunk(
+                b.descriptions.begin() + static_cast<std::ptrdiff_t>(at),
+                b.descriptions.begin() + static_cast<std::ptrdiff_t>(end));
+            auto part = c_.browse(std::move(chunk), 0, deadline());
+            ++roundTrips;
+            for (auto& r : part) results.push_back(std::move(r));
+        }
         for (std::size_t i = 0; i < results.size() && i < b.handlers.size(); ++i) {
             // A server that pages its answer: fetch the rest of this node now (rare).
             std::size_t pages = 0;
