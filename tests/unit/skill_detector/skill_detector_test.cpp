@@ -11,6 +11,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <functional>
 #include <mutex>
@@ -20,6 +21,7 @@
 
 #include "support/loopback_server.hpp"
 #include "ua/discovery/registrar.hpp"
+#include "ua/server/nodeset_xml.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/ns0_ids.hpp"
 
@@ -439,4 +441,58 @@ TEST(SkillDetector, ServerRegisteringAtLdsBecomesVisible) {
 #ifndef PNP_SANITIZED_BUILD
     EXPECT_LT(ms[ms.size() / 2], 50.0);
 #endif
+}
+
+// The real skill model (models/*.NodeSet2.xml with DI and Robotics): a SkillMotionDeviceType
+// below DI DeviceSet (a controller by its type), fully instantiated skills.
+TEST(SkillDetector, RealModelFilesMotionDeviceBelowDeviceSet) {
+    namespace fs = std::filesystem;
+    SkillServer srv("urn:pnp:test:arm", false);
+    auto& s = srv.space();
+    auto path = ua::server::defaultNodeSetSearchPath();
+    path.emplace_back(PNP_MODELS_DIR);
+    for (const char* f : {"Pnp.Skills.NodeSet2.xml", "Pnp.Skills.Robotics.NodeSet2.xml",
+                          "Pnp.Skills.Demo.NodeSet2.xml"})
+        ua::server::loadNodeSetXml(s, fs::path(PNP_MODELS_DIR) / f, path);
+    const auto di = *s.namespaceIndex(kDiUri);
+    auto deviceSet = s.resolvePath(ua::NodeId(0, ua::ns0::ObjectsFolder),
+                                   std::vector<ua::QualifiedName>{{di, "DeviceSet"}});
+    ASSERT_TRUE(deviceSet);
+    auto arm = s.instantiate(*deviceSet, srv.type(types::SkillMotionDeviceType),
+                             ua::NodeId(1, "Arm"), {1, "Arm"});
+    const auto base = *s.namespaceIndex(kBaseUri);
+    auto skills = s.resolvePath(arm, std::vector<ua::QualifiedName>{{base, "Skills"}});
+    ASSERT_TRUE(skills);
+    ua::server::InstantiateOptions organizes;
+    organizes.referenceType = ua::NodeId(0, ua::ns0::Organizes);
+    s.instantiate(*skills, srv.type(types::CartesianPtpMoveSkillType), ua::NodeId(1, "Arm.Ptp"),
+                  {1, "MoveToPose"}, organizes);
+    s.instantiate(*skills, srv.type(types::DelaySkillType), ua::NodeId(1, "Arm.Wait"),
+                  {1, "GraspGripperSkill"}, organizes);
+    auto name = s.resolvePath(arm, std::vector<ua::QualifiedName>{{base, "Name"}});
+    ASSERT_TRUE(name);
+    s.setValue(*name, ua::DataValue(ua::Variant(ua::LocalizedText("", "UR5e"))));
+    srv.server->start();
+
+    SkillDetector d(nullptr, directConfig());
+    d.start();
+    d.addServer(srv.url());
+    ASSERT_TRUE(waitFor(d, [](const SkillDetector& x) {
+        auto st = x.servers();
+        return st.size() == 1 && st[0].status == ServerState::Status::Skills;
+    }));
+    EXPECT_EQ(skillNames(d.all()), (std::vector<std::string>{"GraspGripperSkill", "MoveToPose"}));
+    auto move = d.find(types::MoveSkillType);
+    ASSERT_EQ(move.size(), 1u);
+    EXPECT_EQ(move[0].type.name, "CartesianPtpMoveSkillType");
+    ASSERT_EQ(move[0].typeChain.size(), 4u);
+    EXPECT_EQ(move[0].typeChain[1].name, "PtpMoveSkillType");
+    EXPECT_EQ(move[0].typeChain[2].name, "MoveSkillType");
+    EXPECT_EQ(move[0].controller, arm);
+    EXPECT_EQ(move[0].controllerName, "UR5e");
+    EXPECT_EQ(d.find(types::DelaySkillType).size(), 1u);
+    EXPECT_TRUE(d.find(types::GripperSkillType).empty());
+    auto st = d.servers()[0];
+    std::printf("real model: examination %.2f ms, %zu requests after connect\n", st.examineMs,
+                st.roundTrips);
 }
