@@ -157,7 +157,8 @@ TEST(SkillDetector, FindsSkillsByTypeAndSubtype) {
     EXPECT_EQ(delay[0].componentName, "gripper component");
     EXPECT_EQ(delay[0].controllerName, "Gripper controller");
     EXPECT_EQ(delay[0].controller, ua::NodeId(1, "Gripper"));
-    EXPECT_EQ(delay[0].nodeText, "nsu=urn:pnp:server;s=Gripper.Skills.Wait");
+    // ns=1 is the server's own namespace (its ApplicationUri): the text names the URI.
+    EXPECT_EQ(delay[0].nodeText, "nsu=urn:pnp:test:gripper;s=Gripper.Skills.Wait");
     EXPECT_EQ(delay[0].endpointUrl, srv.url());
 
     EXPECT_EQ(skillNames(d.find(types::GripperSkillType)), (std::vector<std::string>{"Grasp", "Move"}));
@@ -385,8 +386,9 @@ TEST(SkillDetector, SeveralServersExaminedInParallel) {
     std::set<std::string> uris;
     for (auto& s : d.all()) uris.insert(s.componentUri);
     EXPECT_EQ(uris.size(), 8u);
-    // The same node text on every server: stable across servers.
-    EXPECT_EQ(d.all()[0].nodeText, d.all()[7].nodeText);
+    // The node text names the namespace by URI, whatever its index on that server.
+    for (const auto& s : d.all())
+        EXPECT_EQ(s.nodeText, "nsu=" + s.componentUri + ";s=C.Skills.Wait");
 }
 
 // Discovery: a server registering with an LDS appears in a detector that polls that LDS.
