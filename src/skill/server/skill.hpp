@@ -236,6 +236,11 @@ class Skill {
         return declare<T>(std::move(name), true, std::move(defaultValue));
     }
 
+    // An untyped declaration (the callbacks form).
+    void declareRaw(ParameterDeclaration declaration) {
+        parameters_.push_back(std::move(declaration));
+    }
+
   private:
     template <class T>
     Param<T> declare(std::string name, bool optional, T defaultValue) {
@@ -250,9 +255,11 @@ class Skill {
 
 // The callbacks form: a skill without a class of its own.
 struct SkillCallbacks {
-    std::function<Outcome(Execution&)> execute;
-    std::function<ua::StatusCode()> suspend, resume, reset;
-    std::function<void()> halt;
+    std::function<Outcome(Execution&)> execute = {};
+    std::function<ua::StatusCode()> suspend = {};
+    std::function<ua::StatusCode()> resume = {};
+    std::function<ua::StatusCode()> reset = {};
+    std::function<void()> halt = {};
 };
 std::shared_ptr<Skill> makeSkill(ModelNode type, std::vector<ParameterDeclaration> parameters,
                                  SkillCallbacks callbacks);

@@ -572,6 +572,7 @@ NodeId AddressSpace::instantiate(const NodeId& parent, const NodeId& type, const
     const bool isObject = cls == NodeClassBits::ObjectType;
     NodeIndex i =
         s.createNode(id, isObject ? NodeClassBits::Object : NodeClassBits::Variable, browseName, a);
+    if (isObject) s.nodes[i].eventNotifier = options.eventNotifier;
     if (!isObject) {
         const NodeExtra* from = s.nodes[td].extra.get();
         auto x = std::make_unique<NodeExtra>();

@@ -220,6 +220,9 @@ struct InstantiateOptions {
     std::vector<QualifiedName> optionalChildren;
     // The reference from the parent; null: as addObject / addVariable choose.
     NodeId referenceType;
+    // The new Object's EventNotifier (e.g. 1: SubscribeToEvents, for a state machine whose
+    // transition events clients monitor on the machine itself).
+    Byte eventNotifier = 0;
 };
 
 struct ViewAttributes : NodeAttributes {
