@@ -1,6 +1,6 @@
 // Skill detector: plug-in of a skill server -> its skill visible in the detector. Each run
-// starts a server (a gripper controller with three skills, the core skill model built in
-// its address space), registers it with an LDS (Registrar, configured URL) and measures
+// starts a server (the demo component of skill/demo: models loaded from models/, a
+// SkillController with Delay, Grasp, Release, MoveGripper), registers it with an LDS (Registrar, configured URL) and measures
 // until the detector's change callback reports the Delay skill. Next to it, in the same run,
 // a bare DiscoveryWatcher polling the same LDS at the same interval: the discovery floor,
 // so the difference is the detector's own examination. All on 127.0.0.1, one process.
@@ -16,11 +16,11 @@
 #include <thread>
 #include <vector>
 
+#include "skill/demo/demo_skills.hpp"
 #include "skill/detector/skill_detector.hpp"
 #include "ua/discovery/registrar.hpp"
 #include "ua/discovery/watcher.hpp"
 #include "ua/server/server.hpp"
-#include "ua/types/ns0_ids.hpp"
 
 using namespace pnp;
 using namespace pnp::skill;
@@ -33,35 +33,6 @@ ua::server::ServerConfig loopback() {
     c.host = c.publicHost = "127.0.0.1";
     c.port = 0;
     return c;
-}
-
-// The skill model's core types and one controller with three skills.
-void buildSkillServer(ua::server::AddressSpace& s) {
-    auto id = [&](const ModelNode& t) { return ua::NodeId(s.addNamespace(t.uri), t.id); };
-    auto addType = [&](const ua::NodeId& parent, const ModelNode& t) {
-        return s.addObjectType(parent, id(t), {id(t).namespaceIndex(), std::string(t.name)});
-    };
-    auto skill = addType(ua::NodeId(0, ua::ns0::ProgramStateMachineType), types::SkillType);
-    auto iface = addType(ua::NodeId(0, ua::ns0::BaseInterfaceType), types::ISkillControllerType);
-    auto gripper = addType(skill, types::GripperSkillType);
-    auto grasp = addType(gripper, types::GraspGripperSkillType);
-    auto release = addType(gripper, types::ReleaseGripperSkillType);
-    auto delay = addType(skill, types::DelaySkillType);
-    const ua::UInt16 ns = iface.namespaceIndex();
-    ua::server::ObjectAttributes a;
-    a.instantiateMandatory = false;
-    auto deviceSet = s.addFolder(ua::NodeId(0, ua::ns0::ObjectsFolder),
-                                 ua::NodeId(1, "DeviceSet"), {1, "DeviceSet"});
-    auto dev = s.addObject(deviceSet, ua::NodeId(1, "Gripper"), {1, "Gripper"}, a);
-    s.addReference(dev, ua::NodeId(0, ua::ns0::HasInterface), iface);
-    ua::server::VariableAttributes v;
-    v.dataType = ua::NodeId(0, ua::ns0::LocalizedText);
-    v.value = ua::DataValue(ua::Variant(ua::LocalizedText("", "Gripper")));
-    s.addProperty(dev, ua::NodeId(1, "Gripper.Name"), {ns, "Name"}, v);
-    auto skills = s.addFolder(dev, ua::NodeId(1, "Gripper.Skills"), {ns, "Skills"});
-    s.addObject(skills, ua::NodeId(1, "Gripper.Grasp"), {1, "Grasp"}, a, grasp);
-    s.addObject(skills, ua::NodeId(1, "Gripper.Release"), {1, "Release"}, a, release);
-    s.addObject(skills, ua::NodeId(1, "Gripper.Wait"), {1, "Wait"}, a, delay);
 }
 
 struct Stats {
@@ -124,7 +95,8 @@ int main(int argc, char** argv) {
         auto cfg = loopback();
         cfg.applicationUri = "urn:pnp:bench:gripper" + std::to_string(r);
         ua::server::Server srv(cfg);
-        buildSkillServer(srv.addressSpace());
+        demo::loadDemoModels(srv);
+        auto component = demo::addDemoSkills(srv, "Gripper");
         skillAt = watcherAt = 0;
         armed = true;
         auto t0 = Clock::now();
@@ -147,6 +119,7 @@ int main(int argc, char** argv) {
             if (s.applicationUri == cfg.applicationUri) examine.push_back(s.examineMs);
         reg.stop();
         srv.stop();
+        component.reset();  // before the server
         // Unplugged: wait until the detector dropped it, so runs do not overlap.
         det.waitUntil([](const detector::SkillDetector& d) { return d.all().empty(); },
                       std::chrono::seconds(5));

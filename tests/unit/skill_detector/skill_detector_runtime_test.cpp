@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "skill/detector/skill_detector.hpp"
+#include "skill/demo/demo_skills.hpp"
 #include "skill/server/controller.hpp"
 #include "support/loopback_server.hpp"
 #include "ua/server/server.hpp"
@@ -52,6 +53,8 @@ TEST(SkillDetectorRuntime, SkillControllerSkillsAreFoundByTypeDefinition) {
         srv, server::SkillControllerOptions{.name = "Gripper"});
     controller->add("Wait", delaySkill());
     controller->add("GraspGripperSkill", delaySkill());  // the name lies, the type does not
+    // The demo component: Delay, Grasp, Release, MoveGripper.
+    auto demo = demo::addDemoSkills(srv, "DemoGripper");
     srv.start();
 
     SkillDetector d(nullptr, config());
@@ -63,12 +66,17 @@ TEST(SkillDetectorRuntime, SkillControllerSkillsAreFoundByTypeDefinition) {
     });
     d.start();
     d.addServer(pnp::testing::url(srv));
-    ASSERT_TRUE(d.waitUntil([](const SkillDetector& x) { return x.all().size() == 2; }, 3s));
+    ASSERT_TRUE(d.waitUntil([](const SkillDetector& x) { return x.all().size() == 6; }, 3s));
     auto delay = d.find(types::DelaySkillType);
-    EXPECT_EQ(delay.size(), 2u);
-    EXPECT_EQ(d.find(types::SkillType).size(), 2u);
-    EXPECT_TRUE(d.find(types::GraspGripperSkillType).empty());
+    EXPECT_EQ(delay.size(), 3u);
+    EXPECT_EQ(d.find(types::SkillType).size(), 6u);
+    EXPECT_EQ(d.find(types::GripperSkillType).size(), 3u);
+    auto grasp = d.find(types::GraspGripperSkillType);
+    ASSERT_EQ(grasp.size(), 1u);  // the demo's, not the lying Delay
+    EXPECT_EQ(grasp[0].controller, demo->node());
+    EXPECT_EQ(grasp[0].typeChain.size(), 3u);
     for (const auto& s : delay) {
+        if (s.controller != controller->node()) continue;
         EXPECT_EQ(s.componentUri, "urn:pnp:test:runtime");
         EXPECT_EQ(s.controller, controller->node());
         EXPECT_EQ(s.controllerName, "Gripper");
@@ -82,8 +90,9 @@ TEST(SkillDetectorRuntime, SkillControllerSkillsAreFoundByTypeDefinition) {
     srv.stop();
     ASSERT_TRUE(d.waitUntil([](const SkillDetector& x) { return x.all().empty(); }, 3s));
     std::lock_guard l(m);
-    EXPECT_EQ(added, 2);
-    EXPECT_EQ(removed, 2);
+    EXPECT_EQ(added, 6);
+    EXPECT_EQ(removed, 6);
     d.stop();
+    demo.reset();
     controller.reset();
 }
