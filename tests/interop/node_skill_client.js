@@ -55,6 +55,10 @@ const HALTED_TO_READY = 1;
 const READY_TO_RUNNING = 2;
 const RUNNING_TO_HALTED = 3;
 const RUNNING_TO_READY = 4;
+// Their StateNumber (ns0 ProgramStateMachineType: Halted 11, Ready 12, Running 13).
+const HALTED = 11;
+const READY = 12;
+const RUNNING = 13;
 const RESULT_COMPLETED = 1;
 const RESULT_FAILED = 2;
 
@@ -346,6 +350,8 @@ async function main() {
         expect(e.sourceNode && e.sourceNode.toString() === skill.toString(),
             `${what}: SourceNode ${e.sourceNode}, expected ${skill.toString()}`);
         expect(e.time instanceof Date && !isNaN(e.time.getTime()), `${what}: no Time (${e.time})`);
+        expect(typeof e.severity === "number" && e.severity >= 1 && e.severity <= 1000,
+            `${what}: Severity ${e.severity}`);
         return e;
     };
 
@@ -355,8 +361,9 @@ async function main() {
         queue.clear();
         expectGood(await write(a, n.durationMs, DataType.Double, 50), "write DurationMs");
         expectGood((await call(a, skill, n.start)).statusCode, "call Start");
-        const running = await expectEvent({ transition: READY_TO_RUNNING, to: 2 }, "Running event");
-        const ready = await expectEvent({ transition: RUNNING_TO_READY, to: 1 }, "Ready event");
+        const running =
+            await expectEvent({ transition: READY_TO_RUNNING, to: RUNNING }, "Running event");
+        const ready = await expectEvent({ transition: RUNNING_TO_READY, to: READY }, "Ready event");
         expect(ready.time.getTime() >= running.time.getTime(), "Ready event before Running event");
         const result = await readValue(a, n.result, "FinalResultData/Result");
         expect(result === RESULT_COMPLETED, `Result ${result}, expected ${RESULT_COMPLETED}`);
@@ -369,9 +376,9 @@ async function main() {
             queue.clear();
             expectGood(await write(a, n.failWith, DataType.String, reason), "write FailWith");
             expectGood((await call(a, skill, n.start)).statusCode, "call Start");
-            await expectEvent({ transition: READY_TO_RUNNING, to: 2 }, "Running event");
+            await expectEvent({ transition: READY_TO_RUNNING, to: RUNNING }, "Running event");
             const halted =
-                await expectEvent({ transition: RUNNING_TO_HALTED, to: 4 }, "Halted event");
+                await expectEvent({ transition: RUNNING_TO_HALTED, to: HALTED }, "Halted event");
             expect(typeof halted.message === "string" && halted.message.includes(reason),
                 `Halted event Message ${JSON.stringify(halted.message)} lacks "${reason}"`);
             const result = await readValue(a, n.result, "FinalResultData/Result");
@@ -379,7 +386,7 @@ async function main() {
             const message = await readValue(a, n.message, "FinalResultData/Message");
             expect(message === reason, `Message ${JSON.stringify(message)}, expected "${reason}"`);
             expectGood((await call(a, skill, n.reset)).statusCode, "call Reset");
-            await expectEvent({ transition: HALTED_TO_READY, to: 1 }, "Reset event");
+            await expectEvent({ transition: HALTED_TO_READY, to: READY }, "Reset event");
             expectGood(await write(a, n.failWith, DataType.String, ""), "write FailWith \"\"");
         });
 
@@ -421,11 +428,11 @@ async function main() {
         queue.clear();
         expectGood(await write(a, n.durationMs, DataType.Double, 1000), "write DurationMs");
         expectGood((await call(a, skill, n.start)).statusCode, "call Start");
-        await expectEvent({ transition: READY_TO_RUNNING, to: 2 }, "Running event");
+        await expectEvent({ transition: READY_TO_RUNNING, to: RUNNING }, "Running event");
         const again = (await call(a, skill, n.start)).statusCode;
         const ok = [StatusCodes.BadNotExecutable.value, StatusCodes.BadInvalidState.value];
         expect(ok.includes(again.value), `second Start: ${sc(again)}`);
-        await expectEvent({ transition: RUNNING_TO_READY, to: 1 }, "Ready event of the first run");
+        await expectEvent({ transition: RUNNING_TO_READY, to: READY }, "Ready event of run 1");
     });
 
     await cleanup();
