@@ -180,7 +180,7 @@ int main(int argc, char** argv) {
         if (r.result != skill::SkillResult::Completed) bench::fail("run did not complete");
     }
     auto f = bench::summarize(full);
-    b = bench::summarize(raw);
+    auto b = bench::summarize(raw);
     std::printf("no-op skill run() (lock, write, start, events, result, unlock): median %.1f us, "
                 "p99 %.1f us (%d runs; target <= 1000 us)\n",
                 f.median, f.p99, runs);
@@ -206,6 +206,27 @@ int main(int argc, char** argv) {
         timed("Read, a client without threads", [&] { (void)plain.readValue(node); });
         plain.startBackgroundThread();
         timed("Read, with its background thread", [&] { (void)plain.readValue(node); });
+    }
+    {
+        // Start alone, by a client without a subscription, with and without an event item
+        // watching (another client's) - where the Start call's time goes.
+        ua::client::Client plain;
+        plain.connect(server.endpointUrl());
+        const ua::NodeId start(1, "DemoGripper.Delay.Start"), halt(1, "DemoGripper.Delay.Halt"),
+            reset(1, "DemoGripper.Delay.Reset");
+        skill.setParameter("DurationMs", ua::Variant(1000.0));
+        std::vector<double> v;
+        for (int i = 0; i < 200; ++i) {
+            std::this_thread::sleep_for(12ms);
+            const auto t0 = Clock::now();
+            plain.call(delay, start, {});
+            v.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+            plain.call(delay, halt, {});
+            plain.call(delay, reset, {});
+        }
+        std::printf("  %-34s median %7.1f us\n", "Start call (1 s skill, events watched)",
+                    bench::summarize(v).median);
+        skill.setParameter("DurationMs", ua::Variant(0.0));
     }
     timed("Read of a Value", [&] { (void)skill.parameter("DurationMs"); });
     timed("InitLock + ExitLock (2 calls)", [&] {

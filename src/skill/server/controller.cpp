@@ -25,14 +25,17 @@ struct Child {
     QualifiedName browseName;
 };
 
-// The hierarchical children of a node (forward), through the address space's Browse.
-std::vector<Child> childrenOf(const ua::server::AddressSpace& space, const NodeId& node) {
+// The local targets of a node's references of one type (and subtypes), through Browse.
+std::vector<Child> referenced(const ua::server::AddressSpace& space, const NodeId& node,
+                              ua::UInt32 referenceType,
+                              ua::BrowseDirection direction = ua::BrowseDirection::Forward,
+                              bool includeSubtypes = true) {
     ua::server::ContinuationPointStore points(1);
     ua::BrowseDescription d;
     d.nodeId = node;
-    d.browseDirection = ua::BrowseDirection::Forward;
-    d.referenceTypeId = NodeId(0, ns0::HierarchicalReferences);
-    d.includeSubtypes = true;
+    d.browseDirection = direction;
+    d.referenceTypeId = NodeId(0, referenceType);
+    d.includeSubtypes = includeSubtypes;
     d.resultMask = 0x3F;
     ua::BrowseResult r = space.browse(d, 0, points);
     std::vector<Child> out;
@@ -40,6 +43,10 @@ std::vector<Child> childrenOf(const ua::server::AddressSpace& space, const NodeI
         if (ref.nodeId.serverIndex == 0 && ref.nodeId.namespaceUri.empty())
             out.push_back({ref.nodeId.nodeId, ref.browseName});
     return out;
+}
+
+std::vector<Child> childrenOf(const ua::server::AddressSpace& space, const NodeId& node) {
+    return referenced(space, node, ns0::HierarchicalReferences);
 }
 
 NodeId childByName(const ua::server::AddressSpace& space, const NodeId& node,
@@ -91,21 +98,10 @@ SkillController::SkillController(ua::server::Server& server, SkillControllerOpti
     // The interface, unless the type implements it already (e.g. SkillMotionDeviceType).
     bool implements = false;
     for (NodeId t = type; !t.isNull() && !implements;) {
-        ua::server::ContinuationPointStore points(1);
-        ua::BrowseDescription d;
-        d.nodeId = t;
-        d.browseDirection = ua::BrowseDirection::Forward;
-        d.referenceTypeId = NodeId(0, ns0::HasInterface);
-        d.includeSubtypes = true;
-        d.resultMask = 0x3F;
-        for (const auto& ref : space.browse(d, 0, points).references)
-            if (ref.nodeId.nodeId == iface) implements = true;
-        d.nodeId = t;
-        d.browseDirection = ua::BrowseDirection::Inverse;
-        d.referenceTypeId = NodeId(0, ns0::HasSubtype);
-        d.includeSubtypes = false;
-        auto up = space.browse(d, 0, points).references;
-        t = up.empty() ? NodeId() : up.front().nodeId.nodeId;
+        for (const Child& i : referenced(space, t, ns0::HasInterface))
+            if (i.node == iface) implements = true;
+        auto up = referenced(space, t, ns0::HasSubtype, ua::BrowseDirection::Inverse, false);
+        t = up.empty() ? NodeId() : up.front().node;
     }
     if (!implements) space.addReference(node_, NodeId(0, ns0::HasInterface), iface);
 
