@@ -785,6 +785,80 @@ TEST(CliDiscovery, ARestartedLdsGetsTheRegistrationBackWithinAnInterval) {
     lds->terminate();
 }
 
+// ---- skills: pnp demo-skills, pnp skills, pnp skill run --------------------------------------
+TEST(CliSkills, SkillsListsTheDemoSkillsAndSkillRunRunsThem) {
+    const int port = freePort();
+    Child server(withBinary({"demo-skills", "--host", "127.0.0.1", "--port", std::to_string(port),
+                             "--no-register"}));
+    ASSERT_TRUE(server.waitForLine("listening on", milliseconds(10000))) << server.err;
+    const std::string url = "opc.tcp://127.0.0.1:" + std::to_string(port);
+
+    auto r = run({"skills", "--once", "--json", "--no-mdns", "--url", url, "--duration", "1500"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    std::set<std::string> types;
+    for (const auto& s : parseJson(r)) {
+        types.insert(s.value("type", ""));
+        EXPECT_EQ(s.value("url", ""), url);
+        EXPECT_EQ(s.value("component", ""), "DemoGripper");
+        EXPECT_EQ(s.at("typeChain").back(), "SkillType");
+    }
+    EXPECT_EQ(types, (std::set<std::string>{"DelaySkillType", "GraspGripperSkillType",
+                                            "ReleaseGripperSkillType", "MoveGripperSkillType"}))
+        << r.out;
+    // --type keeps subtypes of the type only.
+    r = run({"skills", "--once", "--json", "--no-mdns", "--url", url, "--duration", "1500",
+             "--type", "GripperSkillType"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    EXPECT_EQ(parseJson(r).size(), 3u) << r.out;
+
+    // A run prints its transitions and its result.
+    r = run({"skill", "run", url, "--skill", "MoveGripper", "Width=0.02", "--json"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    json j = parseJson(r);
+    EXPECT_EQ(j.value("result", ""), "Completed");
+    ASSERT_GE(j.at("transitions").size(), 2u) << r.out;
+    EXPECT_EQ(j.at("transitions")[0].value("to", ""), "Running");
+    EXPECT_EQ(j.at("transitions").back().value("to", ""), "Ready");
+
+    // Failed -> exit 3 with the reason; the next run resets the skill first.
+    r = run({"skill", "run", url, "--skill", "Delay", "DurationMs=5", "FailWith=jammed"});
+    EXPECT_EQ(r.exitCode, 3) << describe(r);
+    EXPECT_NE(r.out.find("Failed: jammed"), std::string::npos) << r.out;
+    r = run({"skill", "run", url, "--skill", "Delay", "DurationMs=1", "FailWith="});
+    EXPECT_EQ(r.exitCode, 0) << describe(r);
+    EXPECT_NE(r.out.find("Completed"), std::string::npos) << r.out;
+    // Past the deadline: halted, exit 3.
+    r = run({"skill", "run", url, "--skill", "Delay", "DurationMs=10000", "--timeout", "300"});
+    EXPECT_EQ(r.exitCode, 3) << describe(r);
+    EXPECT_NE(r.out.find("TimedOut"), std::string::npos) << r.out;
+    // Usage errors: a value of the wrong type, an unknown parameter, several skills without
+    // --skill, an unknown type.
+    EXPECT_EQ(run({"skill", "run", url, "--skill", "MoveGripper", "Width=wide"}).exitCode, 2);
+    EXPECT_EQ(run({"skill", "run", url, "--skill", "MoveGripper", "Speed=1"}).exitCode, 2);
+    EXPECT_EQ(run({"skill", "run", url, "DurationMs=1"}).exitCode, 2);
+    EXPECT_EQ(run({"skill", "run", "NoSuchSkillType", "--no-mdns", "--lds", url}).exitCode, 2);
+    server.terminate();
+}
+
+TEST(CliSkills, SkillRunFindsASkillByTypeThroughTheLds) {
+    const int ldsPort = freePort();
+    Child lds(withBinary({"lds", "--host", "127.0.0.1", "--port", std::to_string(ldsPort)}));
+    ASSERT_TRUE(lds.waitForLine("listening on", milliseconds(10000))) << lds.err;
+    const std::string ldsUrl = "opc.tcp://127.0.0.1:" + std::to_string(ldsPort);
+    const int port = freePort();
+    Child server(withBinary({"demo-skills", "--host", "127.0.0.1", "--port", std::to_string(port),
+                             "--lds", ldsUrl}));
+    ASSERT_TRUE(server.waitForLine("listening on", milliseconds(10000))) << server.err;
+    auto r = run({"skill", "run", "ReleaseGripperSkillType", "--no-mdns", "--lds", ldsUrl,
+                  "--discover", "5000", "--json"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    json j = parseJson(r);
+    EXPECT_EQ(j.value("name", ""), "Release");
+    EXPECT_EQ(j.value("result", ""), "Completed");
+    server.terminate();
+    lds.terminate();
+}
+
 TEST(CliDiscovery, UsageErrors) {
     EXPECT_EQ(run({"discover", "--no-mdns"}).exitCode, 2);
     EXPECT_EQ(run({"discover", "--poll", "1"}).exitCode, 2);
