@@ -3,11 +3,12 @@
 #
 #   cell bus 10.10.0.0/24   pnp lds (LDS-ME, level 0) .1      you: `pnp discover` .100
 #                           ws1 .11, ws2 .12 (pnp ua serve --lds-me: workstations)
-#   ws1 segment 10.11.0.0/24  devices d11 .11, d12 .12 (pnp ua serve)
-#   ws2 segment 10.12.0.0/24  devices d21 .11, d22 .12
+#   ws1 segment 10.11.0.0/24  devices d11 .11 (gripper skills: pnp demo-skills), d12 .12
+#   ws2 segment 10.12.0.0/24  devices d21 .11, d22 .12 (gripper skills)
 #
 # Devices register with their workstation, workstations with the cell bus; `pnp discover`
-# on the cell bus shows every server as it appears. Then the script unplugs and plugs
+# on the cell bus shows every server as it appears and `pnp skills` every skill (by type);
+# a skill is run by its type with `pnp skill run`. Then the script unplugs and plugs
 # devices so that you can watch them come and go, and keeps running until Ctrl-C (or for
 # PNP_SIM_SECONDS). Everything it creates is removed on exit.
 #
@@ -88,9 +89,20 @@ start cell cell lds --port 4840 --public-host 10.10.0.1 --name cell-bus
 for k in 1 2; do
     start "ws$k" "ws$k" ua serve --port 4840 --public-host "10.10.0.1$k" --lds-me --name "ws$k"
 done
-for d in d11 d12 d21 d22; do
-    start "$d" "$d" ua serve --port 4840 --public-host "10.1${d:1:1}.0.1${d:2:1}" --name "$d"
-done
+log "pnp skills on the cell bus: the skills of every component, by type, as they come and go"
+ip netns exec "${P}client" "$PNP" skills &
+PIDS+=($!)
+# d11 and d22 are grippers offering skills (pnp demo-skills), d12 and d21 plain servers.
+start d11 d11 demo-skills --port 4840 --public-host 10.11.0.11 --name d11 --controller Gripper11
+start d12 d12 ua serve --port 4840 --public-host 10.11.0.12 --name d12
+start d21 d21 ua serve --port 4840 --public-host 10.12.0.11 --name d21
+start d22 d22 demo-skills --port 4840 --public-host 10.12.0.12 --name d22 --controller Gripper22
+sleep 3
+log "running a MoveGripperSkillType skill, found by type (pnp skill run):"
+ip netns exec "${P}client" "$PNP" skill run MoveGripperSkillType Width=0.03 || true
+log "d22 (a gripper) crashes (kill -9): its skills go with the registration expiry"
+kill -9 "$PID_d22"
+wait "$PID_d22" 2>/dev/null || true
 sleep 3
 log "unplugging d12 (graceful stop)"
 kill "$PID_d12"
