@@ -4,20 +4,20 @@
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <pthread.h>
 #include <sched.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
-#include <pthread.h>
-#include <thread>
 #include <cerrno>
 #include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace pnp::bench {
@@ -39,7 +39,8 @@ inline void pinToCpu(int cpu) {
     cpu_set_t set;
     CPU_ZERO(&set);
     CPU_SET(cpu, &set);
-    if (sched_setaffinity(0, sizeof set, &set) != 0) fail("sched_setaffinity(" + std::to_string(cpu) + ")");
+    if (sched_setaffinity(0, sizeof set, &set) != 0)
+        fail("sched_setaffinity(" + std::to_string(cpu) + ")");
 }
 
 // The CPUs the calling thread may run on, as "0" or "0,1".

@@ -1,9 +1,10 @@
 // Skill detector: plug-in of a skill server -> its skill visible in the detector. Each run
 // starts a server (the demo component of skill/demo: models loaded from models/, a
-// SkillController with Delay, Grasp, Release, MoveGripper), registers it with an LDS (Registrar, configured URL) and measures
-// until the detector's change callback reports the Delay skill. Next to it, in the same run,
-// a bare DiscoveryWatcher polling the same LDS at the same interval: the discovery floor,
-// so the difference is the detector's own examination. All on 127.0.0.1, one process.
+// SkillController with Delay, Grasp, Release, MoveGripper), registers it with an LDS (Registrar,
+// configured URL) and measures until the detector's change callback reports the Delay skill. Next
+// to it, in the same run, a bare DiscoveryWatcher polling the same LDS at the same interval: the
+// discovery floor, so the difference is the detector's own examination. All on 127.0.0.1, one
+// process.
 //
 // usage: pnp_bench_skill_detector [--runs R] [--poll MS]
 #include <algorithm>
@@ -83,11 +84,11 @@ int main(int argc, char** argv) {
     });
     det.start();
     // The floor: discovery alone (poll + GetEndpoints), same LDS, same interval.
-    ua::discovery::DiscoveryWatcher bare(nullptr, wc,
-                                         [&](const ua::discovery::DiscoveredServer& s, bool up) {
-                                             if (up && armed && s.discoveryUrl != ldsUrl)
-                                                 watcherAt = Clock::now().time_since_epoch().count();
-                                         });
+    ua::discovery::DiscoveryWatcher bare(
+        nullptr, wc, [&](const ua::discovery::DiscoveredServer& s, bool up) {
+            if (up && armed && s.discoveryUrl != ldsUrl)
+                watcherAt = Clock::now().time_since_epoch().count();
+        });
     bare.start();
 
     std::vector<double> visible, floor, examine;
@@ -129,8 +130,7 @@ int main(int argc, char** argv) {
     lds.stop();
 
     auto v = stats(visible), f = stats(floor), e = stats(examine);
-    std::printf("pnp_bench_skill_detector: %d plug-ins, LDS poll %d ms, 127.0.0.1\n", runs,
-                pollMs);
+    std::printf("pnp_bench_skill_detector: %d plug-ins, LDS poll %d ms, 127.0.0.1\n", runs, pollMs);
     std::printf("%-52s %10s %10s %10s\n", "", "median ms", "p95 ms", "max ms");
     auto row = [](const char* name, const Stats& s) {
         std::printf("%-52s %10.2f %10.2f %10.2f\n", name, s.median, s.p95, s.max);

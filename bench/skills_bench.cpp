@@ -7,9 +7,12 @@
 //       FinalResultData, ExitLock.
 // Prints medians and p99 and the ratio (a)/(b). Targets (issue 5): (a) <= 2 x (b); (c) <= 1 ms.
 //
-// usage: pnp_bench_skills [--runs N]
+// usage: pnp_bench_skills [--runs N] [--server-exe PNP | -]  (default: the pnp binary of the
+// build, `pnp demo-skills` in a process of its own; "-": the server in this process)
 #include <netinet/in.h>
+#include <signal.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -57,7 +60,8 @@ class EchoThread {
             std::vector<unsigned char> buf;
             for (;;) {
                 long n = bench::recvFrame(fd, buf, 1 << 16);
-                if (n < 0 || !bench::sendAll(fd, buf.data(), static_cast<std::size_t>(n) + 4)) break;
+                if (n < 0 || !bench::sendAll(fd, buf.data(), static_cast<std::size_t>(n) + 4))
+                    break;
             }
             ::close(fd);
         });
@@ -86,28 +90,80 @@ double rawRoundTripUs(int fd) {
 
 }  // namespace
 
+// `pnp demo-skills` as a process of its own (as a real skill server runs); killed at exit.
+struct ServerProcess {
+    pid_t pid = -1;
+    std::string url;
+    explicit ServerProcess(const std::string& exe) {
+        int fds[2];
+        if (::pipe(fds) != 0) bench::fail("pipe");
+        pid = ::fork();
+        if (pid == 0) {
+            ::dup2(fds[1], 1);
+            ::close(fds[0]);
+            ::execl(exe.c_str(), exe.c_str(), "demo-skills", "--port", "0", "--host", "127.0.0.1",
+                    "--no-register", static_cast<char*>(nullptr));
+            ::_exit(127);
+        }
+        ::close(fds[1]);
+        std::string line;
+        char c;
+        while (line.size() < 4096 && ::read(fds[0], &c, 1) == 1 && c != '\n') line += c;
+        ::close(fds[0]);
+        const std::string prefix = "listening on ";
+        if (line.rfind(prefix, 0) != 0) bench::fail("pnp demo-skills did not start: " + line);
+        url = line.substr(prefix.size());
+    }
+    ~ServerProcess() {
+        if (pid > 0) {
+            ::kill(pid, SIGTERM);
+            ::waitpid(pid, nullptr, 0);
+        }
+    }
+};
+
 int main(int argc, char** argv) {
     int runs = 2000;
-    for (int i = 1; i + 1 < argc; ++i)
+    std::string serverExe;  // empty: the server runs in this process
+    for (int i = 1; i + 1 < argc; ++i) {
         if (std::string(argv[i]) == "--runs") runs = std::max(10, std::atoi(argv[i + 1]));
+        if (std::string(argv[i]) == "--server-exe") serverExe = argv[i + 1];
+    }
+#ifdef PNP_BENCH_PNP_EXE
+    if (serverExe.empty()) serverExe = PNP_BENCH_PNP_EXE;
+#endif
+    if (serverExe == "-") serverExe.clear();
 
     ua::server::ServerConfig config;
     config.host = "127.0.0.1";
     config.publicHost = "127.0.0.1";
     config.port = 0;
     ua::server::Server server(config);
-    auto controller = skill::demo::addDemoSkills(server);
-    server.start();
+    std::unique_ptr<skill::server::SkillController> controller;
+    std::unique_ptr<ServerProcess> process;
+    std::string serverUrl;
+    if (serverExe.empty()) {
+        controller = skill::demo::addDemoSkills(server);
+        server.start();
+        serverUrl = server.endpointUrl();
+        std::printf("skill server: in this process\n");
+    } else {
+        process = std::make_unique<ServerProcess>(serverExe);
+        serverUrl = process->url;
+        std::printf("skill server: %s demo-skills (a process of its own)\n", serverExe.c_str());
+    }
     EchoThread echo;
     int fd = bench::connectLoopback(echo.port());
     if (fd < 0) bench::fail("connect echo");
 
     auto c = std::make_shared<ua::client::Client>();
-    c->connect(server.endpointUrl());
+    c->connect(serverUrl);
     c->startBackgroundThread();
     const ua::NodeId delay(1, "DemoGripper.Delay");
     skill::client::SkillClient skill(c, delay);
-    skill.setParameter("DurationMs", ua::Variant(std::getenv("PNP_BENCH_DURATION") ? std::atof(std::getenv("PNP_BENCH_DURATION")) : 0.0));
+    skill.setParameter("DurationMs", ua::Variant(std::getenv("PNP_BENCH_DURATION")
+                                                     ? std::atof(std::getenv("PNP_BENCH_DURATION"))
+                                                     : 0.0));
 
     // (a) Start -> Running event, interleaved with (b); twice: CPUs idle between runs
     // (information: an idle vCPU's wake-up is paid by every thread hop), then CPUs kept busy by
@@ -159,10 +215,12 @@ int main(int argc, char** argv) {
         auto a = bench::summarize(startToRunning);
         auto b = bench::summarize(raw);
         auto cr = bench::summarize(callReturned);
-        std::printf("[CPUs %s]\n", busyCores ? "kept busy (target)" : "idle between runs (information)");
-        std::printf("Start call -> Running event at the client: median %.1f us, p99 %.1f us "
-                    "(%d runs; the call returned after %.1f us)\n",
-                    a.median, a.p99, startRuns, cr.median);
+        std::printf("[CPUs %s]\n",
+                    busyCores ? "kept busy (target)" : "idle between runs (information)");
+        std::printf(
+            "Start call -> Running event at the client: median %.1f us, p99 %.1f us "
+            "(%d runs; the call returned after %.1f us)\n",
+            a.median, a.p99, startRuns, cr.median);
         std::printf("raw TCP round trip (64 B, same run):      median %.1f us, p99 %.1f us\n",
                     b.median, b.p99);
         std::printf("ratio (median): %.2f%s\n", a.median / b.median,
@@ -181,9 +239,10 @@ int main(int argc, char** argv) {
     }
     auto f = bench::summarize(full);
     auto b = bench::summarize(raw);
-    std::printf("no-op skill run() (lock, write, start, events, result, unlock): median %.1f us, "
-                "p99 %.1f us (%d runs; target <= 1000 us)\n",
-                f.median, f.p99, runs);
+    std::printf(
+        "no-op skill run() (lock, write, start, events, result, unlock): median %.1f us, "
+        "p99 %.1f us (%d runs; target <= 1000 us)\n",
+        f.median, f.p99, runs);
     std::printf("raw TCP round trip (same run):            median %.1f us  (run() = %.1f x)\n",
                 b.median, f.median / b.median);
 
@@ -201,7 +260,7 @@ int main(int argc, char** argv) {
     std::printf("breakdown (each request alone):\n");
     {
         ua::client::Client plain;
-        plain.connect(server.endpointUrl());
+        plain.connect(serverUrl);
         const ua::NodeId node(1, "DemoGripper.Delay.ParameterSet.DurationMs");
         timed("Read, a client without threads", [&] { (void)plain.readValue(node); });
         plain.startBackgroundThread();
@@ -211,7 +270,7 @@ int main(int argc, char** argv) {
         // Start alone, by a client without a subscription, with and without an event item
         // watching (another client's) - where the Start call's time goes.
         ua::client::Client plain;
-        plain.connect(server.endpointUrl());
+        plain.connect(serverUrl);
         const ua::NodeId start(1, "DemoGripper.Delay.Start"), halt(1, "DemoGripper.Delay.Halt"),
             reset(1, "DemoGripper.Delay.Reset");
         skill.setParameter("DurationMs", ua::Variant(1000.0));
@@ -241,7 +300,9 @@ int main(int argc, char** argv) {
     });
     ::close(fd);
     c.reset();
-    controller.reset();
-    server.stop();
+    if (controller) {
+        controller.reset();
+        server.stop();
+    }
     return 0;
 }

@@ -23,7 +23,7 @@ struct DiscoveryOptions {
     int level = -1;                           // LDS-ME level (lds: 0, serve --lds-me: 1)
     std::vector<std::string> mdnsInterfaces;  // default: by the listen address
     int mdnsPort = 5353;
-    int mdnsTtl = 2;               // s, of our announcements
+    int mdnsTtl = 2;  // s, of our announcements
     // LDS-ME: registration expiry. 1.8 s: a crashed server renewed last up to one
     // register interval before it died, and is gone everywhere within 2 s.
     int expiryMs = 1800;
@@ -107,13 +107,13 @@ struct DiscoverOptions {
 struct SkillsOptions {
     bool json = false;
     bool once = false;
-    int durationMs = 0;              // 0: until Ctrl-C (--once: 2000)
-    std::vector<std::string> lds;    // LDS-MEs polled in addition to mDNS
-    std::vector<std::string> urls;   // servers examined directly (no discovery needed)
+    int durationMs = 0;             // 0: until Ctrl-C (--once: 2000)
+    std::vector<std::string> lds;   // LDS-MEs polled in addition to mDNS
+    std::vector<std::string> urls;  // servers examined directly (no discovery needed)
     bool noMdns = false;
     std::vector<std::string> mdnsInterfaces;
     int mdnsPort = 5353;
-    std::string type;                // only skills of this type (or a subtype)
+    std::string type;  // only skills of this type (or a subtype)
 };
 
 // `pnp skill run URL|TYPE [name=value ...]`: runs one skill and prints its transitions.

@@ -129,14 +129,16 @@ int main(int argc, char** argv) {
     ServeOptions skillsOpts;
     skillsOpts.skillController = "DemoGripper";
     CLI::App* demoSkills = app.add_subcommand(
-        "demo-skills", "run a skill server: a demo gripper with the skills Delay, Grasp, Release, "
-                       "MoveGripper (docs/skills.md)");
+        "demo-skills",
+        "run a skill server: a demo gripper with the skills Delay, Grasp, Release, "
+        "MoveGripper (docs/skills.md)");
     demoSkills->add_option("--port", skillsOpts.port, "TCP port (0: any free port)")
         ->capture_default_str();
     demoSkills->add_option("--host", skillsOpts.host, "address to listen on")
         ->capture_default_str();
-    demoSkills->add_option("--controller", skillsOpts.skillController,
-                           "name of the skill controller (the device node)")
+    demoSkills
+        ->add_option("--controller", skillsOpts.skillController,
+                     "name of the skill controller (the device node)")
         ->capture_default_str();
     addDiscoveryOptions(demoSkills, skillsOpts.discovery, false);
     demoSkills->footer(
@@ -166,8 +168,9 @@ int main(int argc, char** argv) {
     CLI::App* skillCmd = app.add_subcommand("skill", "use one skill (docs/skills.md)");
     skillCmd->require_subcommand(1);
     CLI::App* skillRun = skillCmd->add_subcommand(
-        "run", "run a skill: lock it, write the parameters, start it, print its transitions "
-               "and its result, unlock it");
+        "run",
+        "run a skill: lock it, write the parameters, start it, print its transitions "
+        "and its result, unlock it");
     skillRun
         ->add_option("TARGET", skillRunOpts.target,
                      "the server (opc.tcp://HOST:PORT) or a skill type (e.g. MoveGripperSkillType, "
@@ -187,8 +190,9 @@ int main(int argc, char** argv) {
     skillRun->add_option("--mdns-port", skillRunOpts.mdnsPort, "mDNS UDP port")
         ->capture_default_str()
         ->check(CLI::Range(1, 65535));
-    skillRun->add_option("--discover", skillRunOpts.discoverMs,
-                         "how long to look for a skill of TYPE, ms")
+    skillRun
+        ->add_option("--discover", skillRunOpts.discoverMs,
+                     "how long to look for a skill of TYPE, ms")
         ->capture_default_str();
     skillRun->footer(
         "Exit codes: 0 Completed, 1 OPC UA error, 2 usage error, 3 Failed / Aborted / timed "

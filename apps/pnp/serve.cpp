@@ -11,9 +11,9 @@
 #include <memory>
 
 #include "commands.hpp"
-#include "skill/demo/demo_skills.hpp"
 #include "discovery_commands.hpp"
 #include "output.hpp"
+#include "skill/demo/demo_skills.hpp"
 #include "ua/demo/demo.hpp"
 #include "ua/server/nodeset_xml.hpp"
 #include "ua/server/server.hpp"

@@ -24,9 +24,12 @@ using skill::detector::SkillDetector;
 Json toJson(const DetectedSkill& s) {
     Json chain = Json::array();
     for (const auto& t : s.typeChain) chain.push_back(t.name);
-    return {{"type", s.type.name},      {"typeUri", s.type.uri},
-            {"name", s.name},           {"url", s.endpointUrl},
-            {"node", s.nodeText},       {"component", s.controllerName},
+    return {{"type", s.type.name},
+            {"typeUri", s.type.uri},
+            {"name", s.name},
+            {"url", s.endpointUrl},
+            {"node", s.nodeText},
+            {"component", s.controllerName},
             {"application", s.componentName},
             {"applicationUri", s.componentUri},
             {"typeChain", chain}};
@@ -35,7 +38,8 @@ Json toJson(const DetectedSkill& s) {
 skill::ModelNode typeOrThrow(const std::string& name) {
     if (auto t = skill::typeByName(name)) return *t;
     std::string known;
-    for (const auto& t : skill::knownTypes()) known += (known.empty() ? "" : ", ") + std::string(t.name);
+    for (const auto& t : skill::knownTypes())
+        known += (known.empty() ? "" : ", ") + std::string(t.name);
     throw UsageError("unknown skill type " + name + " (known: " + known + ")");
 }
 
@@ -96,8 +100,9 @@ int runSkills(const SkillsOptions& o) {
         if (o.json) {
             Json j = toJson(s);
             j["event"] = added ? "added" : "removed";
-            j["ms"] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                          .count();
+            j["ms"] =
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                    .count();
             std::cout << j.dump() << std::endl;
         } else {
             std::cout << (added ? "+ " : "- ") << s.type.name << "  " << s.controllerName << "/"
@@ -171,9 +176,9 @@ int runSkillRun(const SkillRunOptions& o) {
     auto servers = detector.servers();
     detector.stop();
     if (candidates.empty()) {
-        std::string why = byUrl ? "no skill" + (o.skill.empty() ? "" : " named " + o.skill) +
-                                      " on " + o.target
-                                : "no skill of type " + std::string(type->name) + " found";
+        std::string why =
+            byUrl ? "no skill" + (o.skill.empty() ? "" : " named " + o.skill) + " on " + o.target
+                  : "no skill of type " + std::string(type->name) + " found";
         if (byUrl && !servers.empty() && !servers.front().error.empty())
             why += " (" + servers.front().error + ")";
         std::cerr << "error: " << why << "\n";

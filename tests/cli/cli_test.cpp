@@ -788,8 +788,8 @@ TEST(CliDiscovery, ARestartedLdsGetsTheRegistrationBackWithinAnInterval) {
 // ---- skills: pnp demo-skills, pnp skills, pnp skill run --------------------------------------
 TEST(CliSkills, SkillsListsTheDemoSkillsAndSkillRunRunsThem) {
     const int port = freePort();
-    Child server(withBinary({"demo-skills", "--host", "127.0.0.1", "--port", std::to_string(port),
-                             "--no-register"}));
+    Child server(withBinary(
+        {"demo-skills", "--host", "127.0.0.1", "--port", std::to_string(port), "--no-register"}));
     ASSERT_TRUE(server.waitForLine("listening on", milliseconds(10000))) << server.err;
     const std::string url = "opc.tcp://127.0.0.1:" + std::to_string(port);
 
@@ -846,8 +846,8 @@ TEST(CliSkills, SkillRunFindsASkillByTypeThroughTheLds) {
     ASSERT_TRUE(lds.waitForLine("listening on", milliseconds(10000))) << lds.err;
     const std::string ldsUrl = "opc.tcp://127.0.0.1:" + std::to_string(ldsPort);
     const int port = freePort();
-    Child server(withBinary({"demo-skills", "--host", "127.0.0.1", "--port", std::to_string(port),
-                             "--lds", ldsUrl}));
+    Child server(withBinary(
+        {"demo-skills", "--host", "127.0.0.1", "--port", std::to_string(port), "--lds", ldsUrl}));
     ASSERT_TRUE(server.waitForLine("listening on", milliseconds(10000))) << server.err;
     auto r = run({"skill", "run", "ReleaseGripperSkillType", "--no-mdns", "--lds", ldsUrl,
                   "--discover", "5000", "--json"});

@@ -128,65 +128,101 @@ bool coerceInto(ua::UInt32 type, bool array, std::string_view text, ua::Variant&
     auto xs = items(text);
     switch (type) {
         case ids::ThreeDFrame:
-            return structsInto(text, 6, array, [](const double* d) {
-                ua::ThreeDFrame f;
-                f.cartesianCoordinates = {d[0], d[1], d[2]};
-                f.orientation = {d[3], d[4], d[5]};
-                return ua::toExtensionObject(f);
-            }, out);
+            return structsInto(
+                text, 6, array,
+                [](const double* d) {
+                    ua::ThreeDFrame f;
+                    f.cartesianCoordinates = {d[0], d[1], d[2]};
+                    f.orientation = {d[3], d[4], d[5]};
+                    return ua::toExtensionObject(f);
+                },
+                out);
         case ids::ThreeDVector:
         case ids::ThreeDCartesianCoordinates:
-            return structsInto(text, 3, array, [type](const double* d) {
-                if (type == ids::ThreeDVector) return ua::toExtensionObject(ua::ThreeDVector{d[0], d[1], d[2]});
-                return ua::toExtensionObject(ua::ThreeDCartesianCoordinates{d[0], d[1], d[2]});
-            }, out);
+            return structsInto(
+                text, 3, array,
+                [type](const double* d) {
+                    if (type == ids::ThreeDVector)
+                        return ua::toExtensionObject(ua::ThreeDVector{d[0], d[1], d[2]});
+                    return ua::toExtensionObject(ua::ThreeDCartesianCoordinates{d[0], d[1], d[2]});
+                },
+                out);
         case ids::Range:
-            return structsInto(text, 2, array, [](const double* d) {
-                return ua::toExtensionObject(ua::Range{d[0], d[1]});
-            }, out);
+            return structsInto(
+                text, 2, array,
+                [](const double* d) {
+                    return ua::toExtensionObject(ua::Range{d[0], d[1]});
+                },
+                out);
         default:
             break;
     }
     if (!array) {
         switch (type) {
-            case ids::Boolean: return scalarInto<bool>(text, toBool, out);
-            case ids::SByte: return scalarInto<ua::SByte>(text, toInt, out);
-            case ids::Byte: return scalarInto<ua::Byte>(text, toUInt, out);
-            case ids::Int16: return scalarInto<ua::Int16>(text, toInt, out);
-            case ids::UInt16: return scalarInto<ua::UInt16>(text, toUInt, out);
-            case ids::Int32: return scalarInto<ua::Int32>(text, toInt, out);
-            case ids::UInt32: return scalarInto<ua::UInt32>(text, toUInt, out);
-            case ids::Int64: return scalarInto<ua::Int64>(text, toInt, out);
-            case ids::UInt64: return scalarInto<ua::UInt64>(text, toUInt, out);
-            case ids::Float: return scalarInto<ua::Float>(text, toDouble, out);
+            case ids::Boolean:
+                return scalarInto<bool>(text, toBool, out);
+            case ids::SByte:
+                return scalarInto<ua::SByte>(text, toInt, out);
+            case ids::Byte:
+                return scalarInto<ua::Byte>(text, toUInt, out);
+            case ids::Int16:
+                return scalarInto<ua::Int16>(text, toInt, out);
+            case ids::UInt16:
+                return scalarInto<ua::UInt16>(text, toUInt, out);
+            case ids::Int32:
+                return scalarInto<ua::Int32>(text, toInt, out);
+            case ids::UInt32:
+                return scalarInto<ua::UInt32>(text, toUInt, out);
+            case ids::Int64:
+                return scalarInto<ua::Int64>(text, toInt, out);
+            case ids::UInt64:
+                return scalarInto<ua::UInt64>(text, toUInt, out);
+            case ids::Float:
+                return scalarInto<ua::Float>(text, toDouble, out);
             case ids::Double:
-            case ids::Duration: return scalarInto<ua::Double>(text, toDouble, out);
-            case ids::String: out = ua::Variant(ua::String(text)); return true;
+            case ids::Duration:
+                return scalarInto<ua::Double>(text, toDouble, out);
+            case ids::String:
+                out = ua::Variant(ua::String(text));
+                return true;
             case ids::LocalizedText:
                 out = ua::Variant(ua::LocalizedText("", std::string(text)));
                 return true;
-            default: return false;
+            default:
+                return false;
         }
     }
     switch (type) {
-        case ids::Boolean: return arrayInto<bool>(xs, toBool, out);
-        case ids::SByte: return arrayInto<ua::SByte>(xs, toInt, out);
-        case ids::Byte: return arrayInto<ua::Byte>(xs, toUInt, out);
-        case ids::Int16: return arrayInto<ua::Int16>(xs, toInt, out);
-        case ids::UInt16: return arrayInto<ua::UInt16>(xs, toUInt, out);
-        case ids::Int32: return arrayInto<ua::Int32>(xs, toInt, out);
-        case ids::UInt32: return arrayInto<ua::UInt32>(xs, toUInt, out);
-        case ids::Int64: return arrayInto<ua::Int64>(xs, toInt, out);
-        case ids::UInt64: return arrayInto<ua::UInt64>(xs, toUInt, out);
-        case ids::Float: return arrayInto<ua::Float>(xs, toDouble, out);
+        case ids::Boolean:
+            return arrayInto<bool>(xs, toBool, out);
+        case ids::SByte:
+            return arrayInto<ua::SByte>(xs, toInt, out);
+        case ids::Byte:
+            return arrayInto<ua::Byte>(xs, toUInt, out);
+        case ids::Int16:
+            return arrayInto<ua::Int16>(xs, toInt, out);
+        case ids::UInt16:
+            return arrayInto<ua::UInt16>(xs, toUInt, out);
+        case ids::Int32:
+            return arrayInto<ua::Int32>(xs, toInt, out);
+        case ids::UInt32:
+            return arrayInto<ua::UInt32>(xs, toUInt, out);
+        case ids::Int64:
+            return arrayInto<ua::Int64>(xs, toInt, out);
+        case ids::UInt64:
+            return arrayInto<ua::UInt64>(xs, toUInt, out);
+        case ids::Float:
+            return arrayInto<ua::Float>(xs, toDouble, out);
         case ids::Double:
-        case ids::Duration: return arrayInto<ua::Double>(xs, toDouble, out);
+        case ids::Duration:
+            return arrayInto<ua::Double>(xs, toDouble, out);
         case ids::String:
         case ids::LocalizedText: {
             std::vector<ua::String> ss;
             for (auto& x : xs) {
                 std::string_view v = x;
-                if (v.size() >= 2 && v.front() == '"' && v.back() == '"') v = v.substr(1, v.size() - 2);
+                if (v.size() >= 2 && v.front() == '"' && v.back() == '"')
+                    v = v.substr(1, v.size() - 2);
                 ss.emplace_back(v);
             }
             if (type == ids::String) {
@@ -198,7 +234,8 @@ bool coerceInto(ua::UInt32 type, bool array, std::string_view text, ua::Variant&
             }
             return true;
         }
-        default: return false;
+        default:
+            return false;
     }
 }
 
@@ -208,14 +245,25 @@ std::string typeName(const ua::NodeId& dataType, ua::Int32 valueRank) {
     std::string base;
     if (dataType.namespaceIndex() == 0 && dataType.isNumeric()) {
         switch (dataType.numeric()) {
-            case ua::ns0::ThreeDFrame: base = "ThreeDFrame"; break;
-            case ua::ns0::ThreeDVector: base = "ThreeDVector"; break;
-            case ua::ns0::ThreeDCartesianCoordinates: base = "ThreeDCartesianCoordinates"; break;
-            case ua::ns0::Range: base = "Range"; break;
-            case ua::ns0::Duration: base = "Duration"; break;
+            case ua::ns0::ThreeDFrame:
+                base = "ThreeDFrame";
+                break;
+            case ua::ns0::ThreeDVector:
+                base = "ThreeDVector";
+                break;
+            case ua::ns0::ThreeDCartesianCoordinates:
+                base = "ThreeDCartesianCoordinates";
+                break;
+            case ua::ns0::Range:
+                base = "Range";
+                break;
+            case ua::ns0::Duration:
+                base = "Duration";
+                break;
             default:
                 if (dataType.numeric() >= 1 && dataType.numeric() <= 25)
-                    base = std::string(ua::toString(static_cast<ua::BuiltinType>(dataType.numeric())));
+                    base =
+                        std::string(ua::toString(static_cast<ua::BuiltinType>(dataType.numeric())));
         }
     }
     if (base.empty()) base = dataType.toString();
@@ -228,8 +276,8 @@ std::string formatValue(const ua::Variant& value) {
         try {
             if (auto f = ua::fromExtensionObject<ua::ThreeDFrame>(x)) {
                 s << f->cartesianCoordinates.x << ',' << f->cartesianCoordinates.y << ','
-                  << f->cartesianCoordinates.z << ',' << f->orientation.a << ','
-                  << f->orientation.b << ',' << f->orientation.c;
+                  << f->cartesianCoordinates.z << ',' << f->orientation.a << ',' << f->orientation.b
+                  << ',' << f->orientation.c;
                 return s.str();
             }
             if (auto v = ua::fromExtensionObject<ua::ThreeDVector>(x)) {

@@ -35,8 +35,7 @@ class GenericSkillClient : public SkillClient {
     // parameter; BadTypeMismatch: value; BadSyntaxError: no '=').
     NamedValues parse(const std::vector<std::string>& assignments) const;
     ua::Variant coerce(std::string_view name, std::string_view text) const;
-    void setParametersFromText(const std::vector<std::string>& assignments,
-                               Deadline deadline = {});
+    void setParametersFromText(const std::vector<std::string>& assignments, Deadline deadline = {});
     // One line per parameter: "  Name: Type = value" (" (read-only)" when not writable).
     std::string describe(Deadline deadline = {});
 };

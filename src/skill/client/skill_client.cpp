@@ -62,11 +62,16 @@ std::optional<T> integerOf(const ua::Variant* v) {
 ProgramState stateFromId(const ua::NodeId& id) {
     if (id.namespaceIndex() != 0 || !id.isNumeric()) return ProgramState::Unknown;
     switch (id.numeric()) {
-        case ua::ns0::ProgramStateMachineType_Ready: return ProgramState::Ready;
-        case ua::ns0::ProgramStateMachineType_Running: return ProgramState::Running;
-        case ua::ns0::ProgramStateMachineType_Suspended: return ProgramState::Suspended;
-        case ua::ns0::ProgramStateMachineType_Halted: return ProgramState::Halted;
-        default: return ProgramState::Unknown;
+        case ua::ns0::ProgramStateMachineType_Ready:
+            return ProgramState::Ready;
+        case ua::ns0::ProgramStateMachineType_Running:
+            return ProgramState::Running;
+        case ua::ns0::ProgramStateMachineType_Suspended:
+            return ProgramState::Suspended;
+        case ua::ns0::ProgramStateMachineType_Halted:
+            return ProgramState::Halted;
+        default:
+            return ProgramState::Unknown;
     }
 }
 
@@ -79,9 +84,9 @@ ProgramState stateOf(const ua::Variant* number, const ua::Variant* id) {
 }
 
 const std::vector<std::string> kEventSelect = {
-    "Transition",   "Transition/Number", "FromState/Number",   "FromState/Id",
-    "ToState/Number", "ToState/Id",      "IntermediateResult", "Time",
-    "Message",      "Severity",          "SourceNode"};
+    "Transition",     "Transition/Number", "FromState/Number",   "FromState/Id",
+    "ToState/Number", "ToState/Id",        "IntermediateResult", "Time",
+    "Message",        "Severity",          "SourceNode"};
 
 }  // namespace
 
@@ -211,14 +216,14 @@ void SkillClient::discover(Deadline deadline) {
     // Members and the first supertype in one request; absent members are browsed as the
     // skill itself (harmless) to keep the indices fixed.
     auto orSelf = [&](const ua::NodeId& id) { return id.isNull() ? node_ : id; };
-    auto second = client_->browse(
-        {browseOf(orSelf(parameterSet), ua::ns0::HierarchicalReferences),
-         browseOf(orSelf(finalData), ua::ns0::HierarchicalReferences),
-         browseOf(orSelf(lock), ua::ns0::HierarchicalReferences),
-         browseOf(orSelf(currentState), ua::ns0::HasProperty),
-         browseOf(type.node, ua::ns0::HasSubtype, ua::BrowseDirection::Inverse),
-         browseOf(orSelf(lastTransition), ua::ns0::HasProperty)},
-        0, deadline);
+    auto second =
+        client_->browse({browseOf(orSelf(parameterSet), ua::ns0::HierarchicalReferences),
+                         browseOf(orSelf(finalData), ua::ns0::HierarchicalReferences),
+                         browseOf(orSelf(lock), ua::ns0::HierarchicalReferences),
+                         browseOf(orSelf(currentState), ua::ns0::HasProperty),
+                         browseOf(type.node, ua::ns0::HasSubtype, ua::BrowseDirection::Inverse),
+                         browseOf(orSelf(lastTransition), ua::ns0::HasProperty)},
+                        0, deadline);
     if (!parameterSet.isNull())
         for (const auto& ref : second[0].references)
             if (ref.nodeClass == ua::NodeClass::Variable)
@@ -266,18 +271,18 @@ void SkillClient::discover(Deadline deadline) {
     std::vector<ua::ReferenceDescription> supers = second[4].references;
     for (int depth = 0; depth < 32 && !types_.back().is(types::SkillType); ++depth) {
         if (supers.empty() || types_.back().node == ua::NodeId(0, ua::ns0::BaseObjectType))
-            throw Error(status::BadTypeMismatch,
-                        what + " (" + type.name + ") is not a SkillType");
+            throw Error(status::BadTypeMismatch, what + " (" + type.name + ") is not a SkillType");
         TypeInfo super;
         super.node = local(supers[0].nodeId);
         super.name = supers[0].browseName.name;
         fill(super);
         types_.push_back(super);
         if (super.is(types::SkillType)) break;
-        supers = client_->browse(browseOf(super.node, ua::ns0::HasSubtype,
-                                          ua::BrowseDirection::Inverse),
-                                 0, deadline)
-                     .references;
+        supers =
+            client_
+                ->browse(browseOf(super.node, ua::ns0::HasSubtype, ua::BrowseDirection::Inverse), 0,
+                         deadline)
+                .references;
     }
     if (!types_.back().is(types::SkillType))
         throw Error(status::BadTypeMismatch, what + " is not a SkillType");
@@ -309,8 +314,7 @@ void SkillClient::discover(Deadline deadline) {
 }
 
 bool SkillClient::isA(const ModelNode& type) const {
-    return std::any_of(types_.begin(), types_.end(),
-                       [&](const TypeInfo& t) { return t.is(type); });
+    return std::any_of(types_.begin(), types_.end(), [&](const TypeInfo& t) { return t.is(type); });
 }
 
 void SkillClient::requireType(const ModelNode& type) const {
@@ -347,8 +351,7 @@ const ParameterInfo& need(const SkillClient& c, std::string_view name) {
 ua::Variant SkillClient::parameter(std::string_view name, Deadline deadline) {
     const ParameterInfo& p = need(*this, name);
     auto dv = client_->readAttribute(p.node, ua::AttributeId::Value, deadline);
-    if (dv.statusOrGood().isBad())
-        throw Error(dv.statusOrGood(), "read of parameter " + p.name);
+    if (dv.statusOrGood().isBad()) throw Error(dv.statusOrGood(), "read of parameter " + p.name);
     return dv.value.value_or(ua::Variant());
 }
 
@@ -379,8 +382,8 @@ void SkillClient::setParameters(const NamedValues& values, Deadline deadline) {
     auto results = client_->write(std::move(writes), deadline);
     for (std::size_t i = 0; i < values.size() && i < results.size(); ++i)
         if (results[i].isBad())
-            throw Error(results[i], "write of parameter " + values[i].first + " of skill " +
-                                        browseName_);
+            throw Error(results[i],
+                        "write of parameter " + values[i].first + " of skill " + browseName_);
 }
 
 // ---- methods -------------------------------------------------------------------------------
@@ -392,13 +395,11 @@ ua::client::CallResult SkillClient::callMethod(const ua::NodeId& object, const u
         throw Error(status::BadMethodInvalid,
                     "skill " + browseName_ + " has no method " + std::string(what));
     auto r = client_->call(object, method, std::move(inputs), deadline);
-    if (r.status.isBad())
-        throw Error(r.status, std::string(what) + " of skill " + browseName_);
+    if (r.status.isBad()) throw Error(r.status, std::string(what) + " of skill " + browseName_);
     return r;
 }
 
-void SkillClient::callProgram(const ua::NodeId& method, std::string_view what,
-                              Deadline deadline) {
+void SkillClient::callProgram(const ua::NodeId& method, std::string_view what, Deadline deadline) {
     callMethod(node_, method, {}, what, deadline);
 }
 
@@ -411,7 +412,8 @@ void SkillClient::reset(Deadline d) { callProgram(reset_, "Reset", d); }
 ua::Int32 SkillClient::callLock(const ua::NodeId& method, std::vector<ua::Variant> inputs,
                                 std::string_view what, Deadline deadline) {
     auto r = callMethod(lockNode_, method, std::move(inputs), what, deadline);
-    if (r.outputs.empty()) throw Error(status::BadUnexpectedError, std::string(what) + ": no result");
+    if (r.outputs.empty())
+        throw Error(status::BadUnexpectedError, std::string(what) + ": no result");
     auto n = integerOf<ua::Int32>(&r.outputs[0]);
     if (!n) throw Error(status::BadTypeMismatch, std::string(what) + ": result is not an Int32");
     return *n;
@@ -468,8 +470,7 @@ SkillClient::Polled SkillClient::stateAndResult(bool withState, Deadline deadlin
         if (!stateNode.isNull())
             polled.state = stateNumber_.isNull() ? stateOf(nullptr, &v) : stateOf(&v, nullptr);
         if (!lastTransitionNumber_.isNull() && values[results + 1].value)
-            polled.lastTransition =
-                integerOf<ua::UInt32>(&*values[results + 1].value).value_or(0);
+            polled.lastTransition = integerOf<ua::UInt32>(&*values[results + 1].value).value_or(0);
         if (!lastTransitionTime_.isNull() && values[results + 2].value)
             if (const auto* t = values[results + 2].value->scalar<ua::DateTime>())
                 polled.lastTransitionTime = *t;
@@ -540,8 +541,7 @@ std::vector<Transition> SkillClient::takeTransitions() {
     return out;
 }
 
-std::optional<Transition> SkillClient::nextTransition(Deadline deadline,
-                                                      std::stop_token cancel) {
+std::optional<Transition> SkillClient::nextTransition(Deadline deadline, std::stop_token cancel) {
     const Clock::time_point end = resolve(deadline);
     std::unique_lock lock(queue_->mutex);
     auto& q = *queue_;
@@ -604,8 +604,8 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
                     halt(cleanup());
                 } catch (const Error&) {
                 }
-            const bool refused = e.status() == status::BadNotExecutable ||
-                                 e.status() == status::BadInvalidState;
+            const bool refused =
+                e.status() == status::BadNotExecutable || e.status() == status::BadInvalidState;
             if (attempt > 0 || !refused || state(end) != ProgramState::Halted) throw;
             reset(end);
         }
@@ -666,9 +666,9 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
             out.transitions.push_back(std::move(t));
             running = true;
         }
-        const bool endSeen = !out.transitions.empty() &&
-                             (out.transitions.back().to == ProgramState::Ready ||
-                              out.transitions.back().to == ProgramState::Halted);
+        const bool endSeen =
+            !out.transitions.empty() && (out.transitions.back().to == ProgramState::Ready ||
+                                         out.transitions.back().to == ProgramState::Halted);
         if (!endSeen && last.lastTransition != 0) {
             Transition t = transitionFromNumber(last.lastTransition);
             t.time = last.lastTransitionTime;

@@ -44,7 +44,7 @@ using NamedValues = std::vector<std::pair<std::string, ua::Variant>>;
 
 // A type of the skill's type hierarchy, as the server names it.
 struct TypeInfo {
-    std::string uri;  // namespace URI of the type node
+    std::string uri;    // namespace URI of the type node
     ua::UInt32 id = 0;  // numeric id in that namespace (0 for non-numeric ids)
     std::string name;   // BrowseName's name
     ua::NodeId node;
@@ -93,7 +93,7 @@ struct RunResult {
     // interval is seen ended by a Read before its last event arrives: that transition is
     // then built from LastTransition (Transition::polled; onTransition() still gets the event).
     std::vector<Transition> transitions;
-    bool timedOut = false;                // the deadline passed: the run was halted
+    bool timedOut = false;  // the deadline passed: the run was halted
 };
 
 struct SkillClientOptions {

@@ -5,16 +5,15 @@
 namespace pnp::skill::client {
 
 TypedSkillClient::TypedSkillClient(const ModelNode& type, std::shared_ptr<Client> client,
-                                   ua::NodeId skill, Deadline deadline,
-                                   SkillClientOptions options)
+                                   ua::NodeId skill, Deadline deadline, SkillClientOptions options)
     : SkillClient(std::move(client), std::move(skill), deadline, std::move(options)) {
     requireType(type);
 }
 
-#define PNP_TYPED_CLIENT_CTOR(Class, Type)                                                    \
-    Class::Class(std::shared_ptr<Client> client, ua::NodeId skill, Deadline deadline,         \
-                 SkillClientOptions options)                                                  \
-        : TypedSkillClient(types::Type, std::move(client), std::move(skill), deadline,       \
+#define PNP_TYPED_CLIENT_CTOR(Class, Type)                                             \
+    Class::Class(std::shared_ptr<Client> client, ua::NodeId skill, Deadline deadline,  \
+                 SkillClientOptions options)                                           \
+        : TypedSkillClient(types::Type, std::move(client), std::move(skill), deadline, \
                            std::move(options)) {}
 PNP_TYPED_CLIENT_CTOR(GraspGripperSkillClient, GraspGripperSkillType)
 PNP_TYPED_CLIENT_CTOR(ReleaseGripperSkillClient, ReleaseGripperSkillType)
@@ -61,9 +60,8 @@ RunResult JointPtpMoveSkillClient::run(const JointMove& move, Deadline deadline,
 }
 RunResult JointPtpMoveSkillClient::run(std::vector<double> targetJoints,
                                        std::vector<double> maxVelocity,
-                                       std::vector<double> maxAcceleration,
-                                       std::string toolFrame, Deadline deadline,
-                                       std::stop_token cancel) {
+                                       std::vector<double> maxAcceleration, std::string toolFrame,
+                                       Deadline deadline, std::stop_token cancel) {
     return run(JointMove{std::move(targetJoints), std::move(maxVelocity),
                          std::move(maxAcceleration), std::move(toolFrame)},
                deadline, std::move(cancel));
@@ -107,13 +105,12 @@ CartesianMoveResult cartesianResultOf(RunResult r) {
     return out;
 }
 
-CartesianMoveResult CartesianPtpMoveSkillClient::run(const CartesianMove& move,
-                                                     Deadline deadline, std::stop_token cancel) {
+CartesianMoveResult CartesianPtpMoveSkillClient::run(const CartesianMove& move, Deadline deadline,
+                                                     std::stop_token cancel) {
     return cartesianResultOf(SkillClient::run(parametersOf(move), deadline, std::move(cancel)));
 }
 CartesianMoveResult CartesianLinearMoveSkillClient::run(const CartesianMove& move,
-                                                        Deadline deadline,
-                                                        std::stop_token cancel) {
+                                                        Deadline deadline, std::stop_token cancel) {
     return cartesianResultOf(SkillClient::run(parametersOf(move), deadline, std::move(cancel)));
 }
 

@@ -43,8 +43,8 @@ class ReleaseGripperSkillClient : public TypedSkillClient {
 
 class MoveGripperSkillClient : public TypedSkillClient {
   public:
-    MoveGripperSkillClient(std::shared_ptr<Client> client, ua::NodeId skill,
-                           Deadline deadline = {}, SkillClientOptions options = {});
+    MoveGripperSkillClient(std::shared_ptr<Client> client, ua::NodeId skill, Deadline deadline = {},
+                           SkillClientOptions options = {});
     using SkillClient::run;
     RunResult run(double width, double force, Deadline deadline, std::stop_token cancel = {});
 };
@@ -65,8 +65,8 @@ class JointPtpMoveSkillClient : public TypedSkillClient {
     using SkillClient::run;
     RunResult run(const JointMove& move, Deadline deadline, std::stop_token cancel = {});
     RunResult run(std::vector<double> targetJoints, std::vector<double> maxVelocity,
-                  std::vector<double> maxAcceleration, std::string toolFrame,
-                  Deadline deadline, std::stop_token cancel = {});
+                  std::vector<double> maxAcceleration, std::string toolFrame, Deadline deadline,
+                  std::stop_token cancel = {});
 };
 
 class JointLinearMoveSkillClient : public TypedSkillClient {
@@ -76,8 +76,8 @@ class JointLinearMoveSkillClient : public TypedSkillClient {
     using SkillClient::run;
     RunResult run(const JointMove& move, Deadline deadline, std::stop_token cancel = {});
     RunResult run(std::vector<double> targetJoints, std::vector<double> maxVelocity,
-                  std::vector<double> maxAcceleration, std::string toolFrame,
-                  Deadline deadline, std::stop_token cancel = {});
+                  std::vector<double> maxAcceleration, std::string toolFrame, Deadline deadline,
+                  std::stop_token cancel = {});
 };
 
 // Cartesian moves: TargetPosition, AxisBounds, MaxVelocity, MaxAcceleration, ToolFrame.

@@ -74,7 +74,8 @@ class MoveGripperSkill : public server::Skill {
     Param<double> force = parameter<double>("Force", 20.0);
     Outcome execute(Execution& run) override {
         const double target = run.get(width);
-        if (!(target >= 0 && target <= 0.1)) return Outcome::failed("Width must be within 0 .. 0.1 m");
+        if (!(target >= 0 && target <= 0.1))
+            return Outcome::failed("Width must be within 0 .. 0.1 m");
         constexpr double speed = 0.5;  // m/s
         constexpr auto step = 5ms;
         for (int i = 0; i < 1000; ++i) {

@@ -93,8 +93,8 @@ class Examiner {
         ua::NodeId typeDef;
         std::size_t depth = 0;
         std::size_t parent = SIZE_MAX;
-        bool browsed = false;     // its children are known
-        bool queued = false;      // in a Browse of the current round
+        bool browsed = false;  // its children are known
+        bool queued = false;   // in a Browse of the current round
         bool directIface = false;
         bool skillsFolder = false;  // the Skills folder of a controller: children are skills
         bool propsBrowsed = false;
@@ -111,8 +111,8 @@ class Examiner {
     struct Batch {
         std::vector<ua::BrowseDescription> descriptions;
         std::vector<std::function<void(const ua::BrowseResult&)>> handlers;
-        void add(const ua::NodeId& node, ua::BrowseDirection dir, ua::UInt32 refType,
-                 bool subtypes, ua::UInt32 classMask, ua::UInt32 resultMask,
+        void add(const ua::NodeId& node, ua::BrowseDirection dir, ua::UInt32 refType, bool subtypes,
+                 ua::UInt32 classMask, ua::UInt32 resultMask,
                  std::function<void(const ua::BrowseResult&)> handler) {
             ua::BrowseDescription d;
             d.nodeId = node;
@@ -253,8 +253,8 @@ void Examiner::walk() {
                           if (!ref.isForward) continue;
                           std::size_t c = addNode(ref, i);
                           if (c == SIZE_MAX || c == i) continue;
-                          if (std::find(nodes_[i].children.begin(), nodes_[i].children.end(),
-                                        c) == nodes_[i].children.end())
+                          if (std::find(nodes_[i].children.begin(), nodes_[i].children.end(), c) ==
+                              nodes_[i].children.end())
                               nodes_[i].children.push_back(c);
                       }
                   });
@@ -305,8 +305,8 @@ void Examiner::walk() {
                           break;
                       }
                   });
-            b.add(tid, ua::BrowseDirection::Forward, ns0::HasInterface, false, 0,
-                  kResultBrowseName, [this, tid](const ua::BrowseResult& r) {
+            b.add(tid, ua::BrowseDirection::Forward, ns0::HasInterface, false, 0, kResultBrowseName,
+                  [this, tid](const ua::BrowseResult& r) {
                       for (const auto& ref : r.references)
                           if (auto t2 = local(ref.nodeId); t2 && isIface(*t2))
                               types_[tid].iface = true;
@@ -376,8 +376,7 @@ void Examiner::walk() {
     }
 }
 
-std::vector<DetectedSkill> Examiner::skills(const std::string& url,
-                                            const std::string& componentUri,
+std::vector<DetectedSkill> Examiner::skills(const std::string& url, const std::string& componentUri,
                                             const std::string& componentName) {
     std::vector<DetectedSkill> out;
     const ua::NodeId top = skillType();
@@ -413,8 +412,8 @@ std::vector<DetectedSkill> Examiner::skills(const std::string& url,
                 d.componentUri = componentUri;
                 d.componentName = componentName;
                 d.controller = ctrl.id;
-                d.controllerName = ctrl.displayName.empty() ? ctrl.browseName.name
-                                                            : ctrl.displayName;
+                d.controllerName =
+                    ctrl.displayName.empty() ? ctrl.browseName.name : ctrl.displayName;
                 out.push_back(std::move(d));
             }
         }
@@ -422,8 +421,7 @@ std::vector<DetectedSkill> Examiner::skills(const std::string& url,
     return out;
 }
 
-Examination examine(const std::string& url,
-                    const std::optional<ua::ApplicationDescription>& app,
+Examination examine(const std::string& url, const std::optional<ua::ApplicationDescription>& app,
                     const DetectorConfig& cfg) {
     Examination ex;
     auto t0 = Clock::now();

@@ -50,11 +50,11 @@ struct TypeName {
 };
 
 struct DetectedSkill {
-    std::string endpointUrl;  // the server's (discovery) URL
-    ua::NodeId node;          // the skill instance, in the server's namespace indices
-    std::string nodeText;     // "nsu=<uri>;s=..." (stable across servers and restarts)
-    std::string name;         // BrowseName's name of the instance
-    TypeName type;            // concrete type (its HasTypeDefinition)
+    std::string endpointUrl;          // the server's (discovery) URL
+    ua::NodeId node;                  // the skill instance, in the server's namespace indices
+    std::string nodeText;             // "nsu=<uri>;s=..." (stable across servers and restarts)
+    std::string name;                 // BrowseName's name of the instance
+    TypeName type;                    // concrete type (its HasTypeDefinition)
     std::vector<TypeName> typeChain;  // type, its supertype, ..., SkillType
     std::string componentUri;         // the server's ApplicationUri
     std::string componentName;        // its ApplicationName
@@ -91,7 +91,7 @@ std::string_view toString(ServerState::Status s);
 
 struct DetectorConfig {
     ua::discovery::WatcherConfig watcher;
-    bool useDiscovery = true;  // false: addServer() only, no watcher
+    bool useDiscovery = true;                        // false: addServer() only, no watcher
     std::chrono::milliseconds requestTimeout{1000};  // per connect and per request
     std::chrono::milliseconds healthInterval{250};
     std::size_t maxDepth = 4;     // Browse levels below Objects

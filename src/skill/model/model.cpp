@@ -6,13 +6,26 @@ namespace pnp::skill {
 
 const std::vector<ModelNode>& knownTypes() {
     using namespace types;
-    static const std::vector<ModelNode> all = {
-        SkillType, GripperSkillType, GraspGripperSkillType, ReleaseGripperSkillType,
-        MoveGripperSkillType, MoveSkillType, PtpMoveSkillType, LinearMoveSkillType,
-        CartesianPtpMoveSkillType, CartesianLinearMoveSkillType, JointPtpMoveSkillType,
-        JointLinearMoveSkillType, CartesianLinearForceMoveSkillType, PositionStreamSkillType,
-        DetachToolSkillType, AttachToolSkillType, ChangeToolSkillType, PickAndPlaceSkillType,
-        ExecuteProcessSkillType, DelaySkillType};
+    static const std::vector<ModelNode> all = {SkillType,
+                                               GripperSkillType,
+                                               GraspGripperSkillType,
+                                               ReleaseGripperSkillType,
+                                               MoveGripperSkillType,
+                                               MoveSkillType,
+                                               PtpMoveSkillType,
+                                               LinearMoveSkillType,
+                                               CartesianPtpMoveSkillType,
+                                               CartesianLinearMoveSkillType,
+                                               JointPtpMoveSkillType,
+                                               JointLinearMoveSkillType,
+                                               CartesianLinearForceMoveSkillType,
+                                               PositionStreamSkillType,
+                                               DetachToolSkillType,
+                                               AttachToolSkillType,
+                                               ChangeToolSkillType,
+                                               PickAndPlaceSkillType,
+                                               ExecuteProcessSkillType,
+                                               DelaySkillType};
     return all;
 }
 
@@ -29,21 +42,30 @@ std::optional<ModelNode> typeByName(std::string_view name) {
 
 std::string_view toString(SkillResult r) {
     switch (r) {
-        case SkillResult::None: return "None";
-        case SkillResult::Completed: return "Completed";
-        case SkillResult::Failed: return "Failed";
-        case SkillResult::Aborted: return "Aborted";
+        case SkillResult::None:
+            return "None";
+        case SkillResult::Completed:
+            return "Completed";
+        case SkillResult::Failed:
+            return "Failed";
+        case SkillResult::Aborted:
+            return "Aborted";
     }
     return "Unknown";
 }
 
 std::string_view toString(ProgramState s) {
     switch (s) {
-        case ProgramState::Ready: return "Ready";
-        case ProgramState::Running: return "Running";
-        case ProgramState::Suspended: return "Suspended";
-        case ProgramState::Halted: return "Halted";
-        case ProgramState::Unknown: break;
+        case ProgramState::Ready:
+            return "Ready";
+        case ProgramState::Running:
+            return "Running";
+        case ProgramState::Suspended:
+            return "Suspended";
+        case ProgramState::Halted:
+            return "Halted";
+        case ProgramState::Unknown:
+            break;
     }
     return "Unknown";
 }
@@ -58,11 +80,16 @@ ProgramState programStateFromName(std::string_view name) {
 ProgramState programStateFromNumber(ua::UInt32 number) {
     // ProgramStateMachineType: Halted 11, Ready 12, Running 13, Suspended 14.
     switch (number) {
-        case 11: return ProgramState::Halted;
-        case 12: return ProgramState::Ready;
-        case 13: return ProgramState::Running;
-        case 14: return ProgramState::Suspended;
-        default: return ProgramState::Unknown;
+        case 11:
+            return ProgramState::Halted;
+        case 12:
+            return ProgramState::Ready;
+        case 13:
+            return ProgramState::Running;
+        case 14:
+            return ProgramState::Suspended;
+        default:
+            return ProgramState::Unknown;
     }
 }
 
@@ -73,12 +100,12 @@ std::filesystem::path modelsDirectory() {
 }
 
 std::filesystem::path modelFile(std::string_view uri) {
-    const char* file = uri == kBaseUri           ? "Pnp.Skills.NodeSet2.xml"
-                       : uri == kRoboticsUri     ? "Pnp.Skills.Robotics.NodeSet2.xml"
-                       : uri == kToolChangerUri  ? "Pnp.Skills.ToolChanger.NodeSet2.xml"
-                       : uri == kCompositeUri    ? "Pnp.Skills.Composite.NodeSet2.xml"
-                       : uri == kDemoUri         ? "Pnp.Skills.Demo.NodeSet2.xml"
-                                                 : nullptr;
+    const char* file = uri == kBaseUri          ? "Pnp.Skills.NodeSet2.xml"
+                       : uri == kRoboticsUri    ? "Pnp.Skills.Robotics.NodeSet2.xml"
+                       : uri == kToolChangerUri ? "Pnp.Skills.ToolChanger.NodeSet2.xml"
+                       : uri == kCompositeUri   ? "Pnp.Skills.Composite.NodeSet2.xml"
+                       : uri == kDemoUri        ? "Pnp.Skills.Demo.NodeSet2.xml"
+                                                : nullptr;
     if (file == nullptr) return {};
     return modelsDirectory() / file;
 }

@@ -51,18 +51,17 @@ inline constexpr ModelNode MoveSkillType{kRoboticsUri, 1001, "MoveSkillType"};
 inline constexpr ModelNode PtpMoveSkillType{kRoboticsUri, 1002, "PtpMoveSkillType"};
 inline constexpr ModelNode LinearMoveSkillType{kRoboticsUri, 1003, "LinearMoveSkillType"};
 inline constexpr ModelNode ICartesianMoveSkillParameterType{kRoboticsUri, 1004,
-                                                             "ICartesianMoveSkillParameterType"};
+                                                            "ICartesianMoveSkillParameterType"};
 inline constexpr ModelNode IJointMoveSkillParameterType{kRoboticsUri, 1005,
-                                                         "IJointMoveSkillParameterType"};
+                                                        "IJointMoveSkillParameterType"};
 inline constexpr ModelNode CartesianPtpMoveSkillType{kRoboticsUri, 1006,
-                                                      "CartesianPtpMoveSkillType"};
+                                                     "CartesianPtpMoveSkillType"};
 inline constexpr ModelNode CartesianLinearMoveSkillType{kRoboticsUri, 1007,
-                                                         "CartesianLinearMoveSkillType"};
+                                                        "CartesianLinearMoveSkillType"};
 inline constexpr ModelNode JointPtpMoveSkillType{kRoboticsUri, 1008, "JointPtpMoveSkillType"};
-inline constexpr ModelNode JointLinearMoveSkillType{kRoboticsUri, 1009,
-                                                     "JointLinearMoveSkillType"};
+inline constexpr ModelNode JointLinearMoveSkillType{kRoboticsUri, 1009, "JointLinearMoveSkillType"};
 inline constexpr ModelNode CartesianLinearForceMoveSkillType{kRoboticsUri, 1010,
-                                                              "CartesianLinearForceMoveSkillType"};
+                                                             "CartesianLinearForceMoveSkillType"};
 inline constexpr ModelNode PositionStreamSkillType{kRoboticsUri, 1011, "PositionStreamSkillType"};
 inline constexpr ModelNode SkillMotionDeviceType{kRoboticsUri, 1012, "SkillMotionDeviceType"};
 // urn:pnp:ua:skills:toolchanger
@@ -71,8 +70,7 @@ inline constexpr ModelNode AttachToolSkillType{kToolChangerUri, 1002, "AttachToo
 inline constexpr ModelNode ChangeToolSkillType{kToolChangerUri, 1003, "ChangeToolSkillType"};
 // urn:pnp:ua:skills:composite
 inline constexpr ModelNode PickAndPlaceSkillType{kCompositeUri, 1001, "PickAndPlaceSkillType"};
-inline constexpr ModelNode ExecuteProcessSkillType{kCompositeUri, 1002,
-                                                    "ExecuteProcessSkillType"};
+inline constexpr ModelNode ExecuteProcessSkillType{kCompositeUri, 1002, "ExecuteProcessSkillType"};
 // urn:pnp:ua:skills:demo
 inline constexpr ModelNode DelaySkillType{kDemoUri, 1001, "DelaySkillType"};
 }  // namespace types
@@ -106,9 +104,9 @@ inline constexpr std::string_view SkillStep = "SkillStep";
 // DI LockingServices method results (OPC 10000-100 §7.5–7.8).
 namespace lock_status {
 inline constexpr ua::Int32 Ok = 0;
-inline constexpr ua::Int32 AlreadyLocked = -1;    // InitLock
-inline constexpr ua::Int32 NotLocked = -1;        // ExitLock, RenewLock, BreakLock
-inline constexpr ua::Int32 LockedByOther = -2;    // RenewLock / ExitLock by another session
+inline constexpr ua::Int32 AlreadyLocked = -1;  // InitLock
+inline constexpr ua::Int32 NotLocked = -1;      // ExitLock, RenewLock, BreakLock
+inline constexpr ua::Int32 LockedByOther = -2;  // RenewLock / ExitLock by another session
 }  // namespace lock_status
 
 // The models folder: $PNP_SKILL_MODELS when set, else the source tree's models/ (build time).

@@ -62,7 +62,7 @@ std::string valueRankText(ua::Int32 r) {
 
 bool valueRankFits(ua::Int32 declared, ua::Int32 actual) {
     if (declared == actual) return true;
-    if (actual == -2) return true;                           // Any
+    if (actual == -2) return true;                             // Any
     if (actual == -3) return declared == -1 || declared == 1;  // ScalarOrOneDimension
     return false;
 }
@@ -83,8 +83,8 @@ SkillController::SkillController(ua::server::Server& server, SkillControllerOpti
         if (auto di = space.namespaceIndex(kDiUri); di && space.contains(NodeId(*di, 5001)))
             parent = NodeId(*di, 5001);  // DI DeviceSet
     }
-    const NodeId type = options_.type.uri.empty() ? NodeId(0, ns0::BaseObjectType)
-                                                  : resolve(space, options_.type);
+    const NodeId type =
+        options_.type.uri.empty() ? NodeId(0, ns0::BaseObjectType) : resolve(space, options_.type);
     const NodeId id =
         options_.id.isNull() ? NodeId(options_.namespaceIndex, options_.name) : options_.id;
     ua::server::ObjectAttributes attributes;
@@ -154,7 +154,8 @@ SkillHandle SkillController::add(const std::string& name, std::shared_ptr<Skill>
         if (p.optional)
             for (ua::UInt16 ns : modelNamespaces) options.optionalChildren.emplace_back(ns, p.name);
 
-    const std::string idText = (node_.idType() == ua::IdType::String ? node_.string() : options_.name) + "." + name;
+    const std::string idText =
+        (node_.idType() == ua::IdType::String ? node_.string() : options_.name) + "." + name;
     SkillNodes nodes;
     try {
         nodes.node = space.instantiate(skills_, type, NodeId(options_.namespaceIndex, idText),

@@ -76,16 +76,17 @@ LockingServices::LockingServices(ua::server::Server& server, const NodeId& lockO
     }
     std::weak_ptr<State> weak = state_;
     if (!s.remainingVar.isNull())
-        space.setValueCallback(s.remainingVar, {.read = [weak](const NodeId&) {
-                                                    auto st = weak.lock();
-                                                    double ms = 0;
-                                                    if (st) {
-                                                        std::lock_guard l(st->mutex);
-                                                        st->expire(Clock::now());
-                                                        ms = st->remainingMs(Clock::now());
-                                                    }
-                                                    return ua::DataValue(Variant(ms));
-                                                },
+        space.setValueCallback(s.remainingVar, {.read =
+                                                    [weak](const NodeId&) {
+                                                        auto st = weak.lock();
+                                                        double ms = 0;
+                                                        if (st) {
+                                                            std::lock_guard l(st->mutex);
+                                                            st->expire(Clock::now());
+                                                            ms = st->remainingMs(Clock::now());
+                                                        }
+                                                        return ua::DataValue(Variant(ms));
+                                                    },
                                                 .write = {}});
 
     using Op = ua::Int32 (*)(State&, const NodeId& session, const std::vector<Variant>& in);

@@ -39,8 +39,9 @@ void SkillRuntime::bind() {
     using Handler = void (SkillRuntime::*)(const MethodCallContext&, MethodCompletion);
     auto on = [&](std::string_view name, Handler h) {
         NodeId m = fsm_->method(name);
-        if (m.isNull()) throw SkillError("skill " + nodes_.node.toString() + " has no " +
-                                         std::string(name) + " method");
+        if (m.isNull())
+            throw SkillError("skill " + nodes_.node.toString() + " has no " + std::string(name) +
+                             " method");
         space.setMethodHandler(m, [weak, h](const MethodCallContext& ctx, std::vector<Variant>,
                                             MethodCompletion done) {
             auto self = weak.lock();
@@ -87,6 +88,10 @@ ProgramState SkillRuntime::state() const {
 ProgramState SkillRuntime::stateLocked() const { return state(); }
 
 void SkillRuntime::setFinalResult(SkillResult result, const std::string& message) {
+    // Start clears it: skipped when it is clear already (two variable writes less per run).
+    const bool clear = result == SkillResult::None && message.empty();
+    if (clear && finalResultClear_) return;
+    finalResultClear_ = clear;
     auto& space = server_.addressSpace();
     if (!nodes_.result.isNull())
         space.setValue(nodes_.result, ua::DataValue(Variant(static_cast<ua::Int32>(result))));
@@ -222,10 +227,12 @@ void SkillRuntime::finish(const Job& job, Outcome outcome) {
                 if (it != nodes_.results.end()) space.setValue(it->second, ua::DataValue(value));
             }
             const bool ok = outcome.result == SkillResult::Completed;
-            if (!ok && outcome.message.empty()) outcome.message = std::string(toString(outcome.result));
+            if (!ok && outcome.message.empty())
+                outcome.message = std::string(toString(outcome.result));
             setFinalResult(outcome.result, outcome.message);
-            fsm_->transitionTo(ok ? "Ready" : "Halted",
-                               eventFields(outcome.message, ok ? kSeverityNormal : kSeverityFailure));
+            fsm_->transitionTo(
+                ok ? "Ready" : "Halted",
+                eventFields(outcome.message, ok ? kSeverityNormal : kSeverityFailure));
         }
         if (!pendingResets_.empty() && stateLocked() == ProgramState::Halted) {
             intermediate_ = Variant();

@@ -23,10 +23,10 @@ struct SkillNodes {
     ua::NodeId node;
     std::vector<ua::NodeId> parameters;  // by declaration index
     ua::NodeId lock;
-    ua::NodeId result, message;                  // FinalResultData/Result, /Message
+    ua::NodeId result, message;                 // FinalResultData/Result, /Message
     std::map<std::string, ua::NodeId> results;  // other FinalResultData children by name
-    ua::NodeId skillStep;                        // ParameterSet/SkillStep, if any
-    ua::NodeId eventType;                        // SkillTransitionEventType
+    ua::NodeId skillStep;                       // ParameterSet/SkillStep, if any
+    ua::NodeId eventType;                       // SkillTransitionEventType
 };
 
 class SkillRuntime : public std::enable_shared_from_this<SkillRuntime> {
@@ -78,12 +78,13 @@ class SkillRuntime : public std::enable_shared_from_this<SkillRuntime> {
 
     mutable std::mutex mutex_;
     std::condition_variable_any wake_;
-    std::optional<Job> job_;       // handed to the worker
-    bool busy_ = false;            // execute() is running
+    std::optional<Job> job_;  // handed to the worker
+    bool busy_ = false;       // execute() is running
     bool suspended_ = false;
-    std::uint64_t generation_ = 0;  // of the current run
-    std::stop_source stop_;         // of the current run
-    ua::Variant intermediate_;      // IntermediateResult of the next events
+    std::uint64_t generation_ = 0;   // of the current run
+    std::stop_source stop_;          // of the current run
+    ua::Variant intermediate_;       // IntermediateResult of the next events
+    bool finalResultClear_ = false;  // FinalResultData is None / "" (as written last)
     std::vector<ua::server::MethodCompletion> pendingResets_;
     std::atomic<std::uint64_t> runs_{0};
     std::jthread worker_;  // last: joined first

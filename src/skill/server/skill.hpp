@@ -58,27 +58,27 @@ class SkillError : public std::runtime_error {
 // How a C++ parameter type maps onto OPC UA: DataType (ns0) and ValueRank.
 template <class T>
 struct ParamTraits;
-#define PNP_SKILL_PARAM_BUILTIN(T, Id)                                        \
-    template <>                                                               \
-    struct ParamTraits<T> {                                                   \
-        static constexpr ua::UInt32 dataType = Id;                            \
-        static constexpr ua::Int32 valueRank = -1;                            \
-        static ua::Variant toVariant(const T& v) { return ua::Variant(v); }   \
-        static bool fromVariant(const ua::Variant& v, T& out) {               \
-            if (const T* p = v.scalar<T>()) return out = *p, true;            \
-            return false;                                                     \
-        }                                                                     \
-    };                                                                        \
-    template <>                                                               \
-    struct ParamTraits<std::vector<T>> {                                      \
-        static constexpr ua::UInt32 dataType = Id;                            \
-        static constexpr ua::Int32 valueRank = 1;                             \
+#define PNP_SKILL_PARAM_BUILTIN(T, Id)                                                   \
+    template <>                                                                          \
+    struct ParamTraits<T> {                                                              \
+        static constexpr ua::UInt32 dataType = Id;                                       \
+        static constexpr ua::Int32 valueRank = -1;                                       \
+        static ua::Variant toVariant(const T& v) { return ua::Variant(v); }              \
+        static bool fromVariant(const ua::Variant& v, T& out) {                          \
+            if (const T* p = v.scalar<T>()) return out = *p, true;                       \
+            return false;                                                                \
+        }                                                                                \
+    };                                                                                   \
+    template <>                                                                          \
+    struct ParamTraits<std::vector<T>> {                                                 \
+        static constexpr ua::UInt32 dataType = Id;                                       \
+        static constexpr ua::Int32 valueRank = 1;                                        \
         static ua::Variant toVariant(const std::vector<T>& v) { return ua::Variant(v); } \
-        static bool fromVariant(const ua::Variant& v, std::vector<T>& out) {  \
-            if (const auto* p = v.array<T>()) return out = *p, true;          \
-            if (v.isEmpty()) return out.clear(), true;                        \
-            return false;                                                     \
-        }                                                                     \
+        static bool fromVariant(const ua::Variant& v, std::vector<T>& out) {             \
+            if (const auto* p = v.array<T>()) return out = *p, true;                     \
+            if (v.isEmpty()) return out.clear(), true;                                   \
+            return false;                                                                \
+        }                                                                                \
     }
 PNP_SKILL_PARAM_BUILTIN(bool, 1);
 PNP_SKILL_PARAM_BUILTIN(ua::Int32, 6);
@@ -136,10 +136,10 @@ struct ParamTraits<std::vector<T>> {
 
 // A declared parameter: what the skill type's ParameterSet must hold.
 struct ParameterDeclaration {
-    std::string name;       // BrowseName's name below ParameterSet
-    ua::NodeId dataType;    // ns0 DataType
+    std::string name;     // BrowseName's name below ParameterSet
+    ua::NodeId dataType;  // ns0 DataType
     ua::Int32 valueRank = -1;
-    bool optional = false;  // Optional in the type: created on the instance because declared
+    bool optional = false;     // Optional in the type: created on the instance because declared
     ua::Variant defaultValue;  // written into the instance when it has no value
 };
 
@@ -158,7 +158,9 @@ struct Outcome {
     static Outcome completed(std::string message = {}) {
         return {SkillResult::Completed, std::move(message), {}};
     }
-    static Outcome failed(std::string reason) { return {SkillResult::Failed, std::move(reason), {}}; }
+    static Outcome failed(std::string reason) {
+        return {SkillResult::Failed, std::move(reason), {}};
+    }
     static Outcome aborted(std::string reason) {
         return {SkillResult::Aborted, std::move(reason), {}};
     }

@@ -87,6 +87,7 @@ struct FiniteStateMachine::Impl {
         NodeId node;
         std::vector<std::size_t> fromStates;
         MethodHook hook;
+        int executable = -1;  // as last written (-1: not yet): unchanged flags are not rewritten
     };
     std::vector<Method> methods;
 
@@ -308,11 +309,13 @@ struct FiniteStateMachine::Impl {
         // once must find it executable (the handlers check the machine's own state, which
         // changed before any of this).
         if (options.trackExecutable)
-            for (const Method& m : methods) {
+            for (Method& m : methods) {
                 if (m.node.isNull()) continue;
                 const bool on = std::find(m.fromStates.begin(), m.fromStates.end(), current) !=
                                 m.fromStates.end();
+                if (m.executable == static_cast<int>(on)) continue;
                 as.setExecutable(m.node, on);
+                m.executable = on;
             }
         const State& s = states[current];
         set(currentStateId, Variant(s.node));
@@ -389,7 +392,8 @@ struct FiniteStateMachine::Impl {
             if (f.first.size() == 1 && f.first[0].namespaceIndex == 0) {
                 if (f.first[0].name == "Message") {
                     if (const auto* m = f.second.scalar<LocalizedText>()) e.message = *m;
-                    if (const auto* m = f.second.scalar<String>()) e.message = LocalizedText("", *m);
+                    if (const auto* m = f.second.scalar<String>())
+                        e.message = LocalizedText("", *m);
                     continue;
                 }
                 if (f.first[0].name == "Severity") {

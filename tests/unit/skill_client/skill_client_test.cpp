@@ -9,9 +9,9 @@
 #include <chrono>
 #include <cstdio>
 #include <future>
-#include <optional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <stop_token>
 #include <string>
 #include <thread>
@@ -147,13 +147,11 @@ TEST(GenericSkillClient, CoercesTextByDataType) {
     auto p = [](ua::UInt32 type, ua::Int32 rank) {
         return ParameterInfo{"P", {}, ua::NodeId(0, type), rank, true};
     };
-    EXPECT_EQ(coerce(p(ua::ns0::Double, 1), "[1, 2,3]"),
-              ua::Variant(std::vector<double>{1, 2, 3}));
+    EXPECT_EQ(coerce(p(ua::ns0::Double, 1), "[1, 2,3]"), ua::Variant(std::vector<double>{1, 2, 3}));
     EXPECT_EQ(coerce(p(ua::ns0::Double, 1), "1,2"), ua::Variant(std::vector<double>{1, 2}));
     EXPECT_EQ(coerce(p(ua::ns0::Boolean, -1), "true"), ua::Variant(true));
     EXPECT_EQ(coerce(p(ua::ns0::Int32, -1), "-4"), ua::Variant(ua::Int32{-4}));
-    EXPECT_EQ(coerce(p(ua::ns0::UInt32, 1), "[1,2]"),
-              ua::Variant(std::vector<ua::UInt32>{1, 2}));
+    EXPECT_EQ(coerce(p(ua::ns0::UInt32, 1), "[1,2]"), ua::Variant(std::vector<ua::UInt32>{1, 2}));
     EXPECT_EQ(coerce(p(ua::ns0::LocalizedText, -1), "hi"),
               ua::Variant(ua::LocalizedText("", "hi")));
     ua::ThreeDFrame f;
@@ -214,8 +212,8 @@ TEST(SkillClient, RunCompletes) {
     for (int i = 0; i < 20; ++i) {
         auto t0 = ua::client::Clock::now();
         RunResult n = skill.run({{"DurationMs", 0.0}}, 5s);
-        us.push_back(std::chrono::duration<double, std::micro>(ua::client::Clock::now() - t0)
-                         .count());
+        us.push_back(
+            std::chrono::duration<double, std::micro>(ua::client::Clock::now() - t0).count());
         ASSERT_EQ(n.result, SkillResult::Completed) << n.message;
     }
     std::sort(us.begin(), us.end());

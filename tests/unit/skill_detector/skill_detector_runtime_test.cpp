@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "skill/detector/skill_detector.hpp"
 #include "skill/demo/demo_skills.hpp"
+#include "skill/detector/skill_detector.hpp"
 #include "skill/server/controller.hpp"
 #include "support/loopback_server.hpp"
 #include "ua/server/server.hpp"
@@ -26,11 +26,9 @@ using detector::SkillDetector;
 namespace {
 
 std::shared_ptr<server::Skill> delaySkill() {
-    return server::makeSkill(types::DelaySkillType,
-                             {server::declareParameter<double>("DurationMs", 1.0)},
-                             {.execute = [](server::Execution&) {
-                                 return server::Outcome::completed();
-                             }});
+    return server::makeSkill(
+        types::DelaySkillType, {server::declareParameter<double>("DurationMs", 1.0)},
+        {.execute = [](server::Execution&) { return server::Outcome::completed(); }});
 }
 
 detector::DetectorConfig config() {
@@ -84,8 +82,8 @@ TEST(SkillDetectorRuntime, SkillControllerSkillsAreFoundByTypeDefinition) {
         EXPECT_TRUE(s.typeChain.back().matches(types::SkillType));
     }
     auto st = d.servers().at(0);
-    std::printf("runtime server: examination %.2f ms, %zu requests after connect\n",
-                st.examineMs, st.roundTrips);
+    std::printf("runtime server: examination %.2f ms, %zu requests after connect\n", st.examineMs,
+                st.roundTrips);
 
     srv.stop();
     ASSERT_TRUE(d.waitUntil([](const SkillDetector& x) { return x.all().empty(); }, 3s));

@@ -12,8 +12,8 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
-#include <memory>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -49,9 +49,7 @@ struct SkillServer {
         if (model) addModel();
     }
     ua::server::AddressSpace& space() { return server->addressSpace(); }
-    ua::NodeId type(const ModelNode& t) {
-        return ua::NodeId(*space().namespaceIndex(t.uri), t.id);
-    }
+    ua::NodeId type(const ModelNode& t) { return ua::NodeId(*space().namespaceIndex(t.uri), t.id); }
     void addModel() {
         auto& s = space();
         // Another namespace first, so that the model's indices differ from the file's.
@@ -65,8 +63,8 @@ struct SkillServer {
             return s.addObjectType(parent, type(t), {type(t).namespaceIndex(), std::string(t.name)},
                                    isAbstract ? abstract : ua::server::ObjectTypeAttributes{});
         };
-        auto skillType = addType(ua::NodeId(0, ua::ns0::ProgramStateMachineType),
-                                 types::SkillType, true);
+        auto skillType =
+            addType(ua::NodeId(0, ua::ns0::ProgramStateMachineType), types::SkillType, true);
         addType(ua::NodeId(0, ua::ns0::BaseInterfaceType), types::ISkillControllerType, true);
         auto gripper = addType(skillType, types::GripperSkillType, true);
         addType(gripper, types::GraspGripperSkillType, false);
@@ -74,21 +72,20 @@ struct SkillServer {
         addType(skillType, types::DelaySkillType, false);
         // A device type implementing the interface: its instances are controllers without a
         // HasInterface of their own.
-        auto motion = addType(ua::NodeId(0, ua::ns0::BaseObjectType), types::SkillMotionDeviceType,
-                              false);
+        auto motion =
+            addType(ua::NodeId(0, ua::ns0::BaseObjectType), types::SkillMotionDeviceType, false);
         s.addReference(motion, ua::NodeId(0, ua::ns0::HasInterface),
                        type(types::ISkillControllerType));
     }
     // A controller below `parent` (Objects when null) with HasInterface (unless byType).
-    ua::NodeId addController(const std::string& name, bool byType = false,
-                             ua::NodeId parent = {}) {
+    ua::NodeId addController(const std::string& name, bool byType = false, ua::NodeId parent = {}) {
         auto& s = space();
         if (parent.isNull()) parent = ua::NodeId(0, ua::ns0::ObjectsFolder);
         ua::server::ObjectAttributes a;
         a.instantiateMandatory = false;
-        auto dev = s.addObject(parent, ua::NodeId(1, name), {1, name}, a,
-                               byType ? type(types::SkillMotionDeviceType)
-                                      : ua::NodeId(0, ua::ns0::BaseObjectType));
+        auto dev = s.addObject(
+            parent, ua::NodeId(1, name), {1, name}, a,
+            byType ? type(types::SkillMotionDeviceType) : ua::NodeId(0, ua::ns0::BaseObjectType));
         if (!byType)
             s.addReference(dev, ua::NodeId(0, ua::ns0::HasInterface),
                            type(types::ISkillControllerType));
@@ -161,7 +158,8 @@ TEST(SkillDetector, FindsSkillsByTypeAndSubtype) {
     EXPECT_EQ(delay[0].nodeText, "nsu=urn:pnp:test:gripper;s=Gripper.Skills.Wait");
     EXPECT_EQ(delay[0].endpointUrl, srv.url());
 
-    EXPECT_EQ(skillNames(d.find(types::GripperSkillType)), (std::vector<std::string>{"Grasp", "Move"}));
+    EXPECT_EQ(skillNames(d.find(types::GripperSkillType)),
+              (std::vector<std::string>{"Grasp", "Move"}));
     auto g = d.find(types::GraspGripperSkillType);
     ASSERT_EQ(g.size(), 1u);
     EXPECT_EQ(g[0].node, grasp);
@@ -315,7 +313,8 @@ TEST(SkillDetector, StoppedServerIsRemovedAndCallbacksFire) {
     }
     auto t0 = Steady::now();
     srv.server->stop();
-    ASSERT_TRUE(waitFor(d, [](const SkillDetector& x) { return x.all().empty(); }, 3000ms));
+    ASSERT_TRUE(waitFor(
+        d, [](const SkillDetector& x) { return x.all().empty(); }, 3000ms));
     double ms = std::chrono::duration<double, std::milli>(Steady::now() - t0).count();
     std::printf("server stop -> skills removed: %.1f ms (health interval 50 ms)\n", ms);
     {
@@ -378,9 +377,8 @@ TEST(SkillDetector, SeveralServersExaminedInParallel) {
     }
     auto t0 = Steady::now();
     for (auto& s : servers) d.addServer(s->url());
-    ASSERT_TRUE(waitFor(d, [](const SkillDetector& x) {
-        return x.find(types::DelaySkillType).size() == 8;
-    }));
+    ASSERT_TRUE(waitFor(
+        d, [](const SkillDetector& x) { return x.find(types::DelaySkillType).size() == 8; }));
     std::printf("8 servers examined: %.1f ms\n",
                 std::chrono::duration<double, std::milli>(Steady::now() - t0).count());
     std::set<std::string> uris;
@@ -423,11 +421,10 @@ TEST(SkillDetector, ServerRegisteringAtLdsBecomesVisible) {
         rc.ldsUrl = ldsUrl;
         ua::discovery::Registrar reg(*srv.server, nullptr, rc);
         reg.start();
-        ASSERT_TRUE(waitFor(d, [](const SkillDetector& x) {
-            return x.find(types::DelaySkillType).size() == 1;
-        }));
-        ms.push_back(std::chrono::duration<double, std::milli>(
-                         Steady::duration(seenAt.load()) - t0.time_since_epoch())
+        ASSERT_TRUE(waitFor(
+            d, [](const SkillDetector& x) { return x.find(types::DelaySkillType).size() == 1; }));
+        ms.push_back(std::chrono::duration<double, std::milli>(Steady::duration(seenAt.load()) -
+                                                               t0.time_since_epoch())
                          .count());
         auto skills = d.find(types::DelaySkillType);
         EXPECT_EQ(skills[0].componentUri, "urn:pnp:test:plug" + std::to_string(round));
@@ -437,9 +434,10 @@ TEST(SkillDetector, ServerRegisteringAtLdsBecomesVisible) {
         ASSERT_TRUE(waitFor(d, [](const SkillDetector& x) { return x.all().empty(); }));
     }
     std::sort(ms.begin(), ms.end());
-    std::printf("plug-in (server start + register) -> skill visible: median %.1f ms, max %.1f "
-                "ms (LDS poll 10 ms)\n",
-                ms[ms.size() / 2], ms.back());
+    std::printf(
+        "plug-in (server start + register) -> skill visible: median %.1f ms, max %.1f "
+        "ms (LDS poll 10 ms)\n",
+        ms[ms.size() / 2], ms.back());
 #ifndef PNP_SANITIZED_BUILD
     EXPECT_LT(ms[ms.size() / 2], 50.0);
 #endif

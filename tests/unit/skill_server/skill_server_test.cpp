@@ -57,11 +57,9 @@ struct SkillServer {
         controller.reset();
         server.stop();
     }
-    NodeId skill(const std::string& name) const {
-        return NodeId(1, "DemoGripper." + name);
-    }
-    NodeId member(const NodeId& skill, std::initializer_list<std::pair<std::string_view, const char*>>
-                                           path) const {
+    NodeId skill(const std::string& name) const { return NodeId(1, "DemoGripper." + name); }
+    NodeId member(const NodeId& skill,
+                  std::initializer_list<std::pair<std::string_view, const char*>> path) const {
         std::vector<QualifiedName> names;
         auto& space = const_cast<ua::server::Server&>(server).addressSpace();
         for (auto [uri, name] : path)
@@ -73,7 +71,9 @@ struct SkillServer {
     NodeId parameter(const NodeId& skill, const char* name, std::string_view uri = kDemoUri) const {
         return member(skill, {{kDiUri, "ParameterSet"}, {uri, name}});
     }
-    NodeId method(const NodeId& skill, const char* name) const { return member(skill, {{"", name}}); }
+    NodeId method(const NodeId& skill, const char* name) const {
+        return member(skill, {{"", name}});
+    }
     NodeId lockMethod(const NodeId& skill, const char* name) const {
         return member(skill, {{kDiUri, "Lock"}, {kDiUri, name}});
     }
@@ -93,8 +93,9 @@ struct Session {
         if (std::string_view(name) == "InitLock") in.emplace_back(ua::String("test"));
         auto r = c.call(s.member(skill, {{kDiUri, "Lock"}}), s.lockMethod(skill, name), in);
         EXPECT_TRUE(r.ok()) << name << " " << r.status.toString();
-        return r.outputs.empty() || !r.outputs[0].scalar<ua::Int32>() ? -99
-                                                                       : *r.outputs[0].scalar<ua::Int32>();
+        return r.outputs.empty() || !r.outputs[0].scalar<ua::Int32>()
+                   ? -99
+                   : *r.outputs[0].scalar<ua::Int32>();
     }
     ua::UInt32 stateNumber(const SkillServer& s, const NodeId& skill) {
         Variant v = c.readValue(s.member(skill, {{"", "CurrentState"}, {"", "Number"}}));
@@ -110,29 +111,30 @@ struct Transitions {
     client::MonitoredItem item;
     Transitions(Session& session, const SkillServer& s, const NodeId& skill) {
         sub = client::Subscription(session.c, {.publishingInterval = 10});
-        const NodeId type(*const_cast<ua::server::Server&>(s.server).addressSpace().namespaceIndex(
-                              kBaseUri),
-                          types::SkillTransitionEventType.id);
-        item = sub.monitorEvents(
-            skill,
-            {.select = {"Transition/Number", "FromState/Number", "ToState/Number", "Message",
-                        "IntermediateResult", "SourceNode"},
-             .eventType = NodeId(0, ns0::ProgramTransitionEventType),
-             .where = client::whereOfType(type)},
-            [this](client::EventFields& e) {
-                Seen s;
-                auto u = [&](std::size_t i) {
-                    const auto* v = e[i].scalar<ua::UInt32>();
-                    return v ? *v : 0u;
-                };
-                s.transition = u(0);
-                s.from = u(1);
-                s.to = u(2);
-                if (const auto* m = e[3].scalar<ua::LocalizedText>()) s.message = m->text;
-                s.intermediate = e[4];
-                if (const auto* n = e[5].scalar<NodeId>()) s.source = *n;
-                inbox.put(std::move(s));
-            });
+        const NodeId type(
+            *const_cast<ua::server::Server&>(s.server).addressSpace().namespaceIndex(kBaseUri),
+            types::SkillTransitionEventType.id);
+        item =
+            sub.monitorEvents(skill,
+                              {.select = {"Transition/Number", "FromState/Number", "ToState/Number",
+                                          "Message", "IntermediateResult", "SourceNode"},
+                               .eventType = NodeId(0, ns0::ProgramTransitionEventType),
+                               .where = client::whereOfType(type)},
+                              [this](client::EventFields& e) {
+                                  Seen s;
+                                  auto u = [&](std::size_t i) {
+                                      const auto* v = e[i].scalar<ua::UInt32>();
+                                      return v ? *v : 0u;
+                                  };
+                                  s.transition = u(0);
+                                  s.from = u(1);
+                                  s.to = u(2);
+                                  if (const auto* m = e[3].scalar<ua::LocalizedText>())
+                                      s.message = m->text;
+                                  s.intermediate = e[4];
+                                  if (const auto* n = e[5].scalar<NodeId>()) s.source = *n;
+                                  inbox.put(std::move(s));
+                              });
     }
     std::vector<Seen> take(std::size_t n) {
         EXPECT_TRUE(inbox.waitForCount(n, 5000ms)) << "expected " << n << " transitions";
@@ -156,7 +158,8 @@ TEST(SkillServer, InstantCompletionStillGoesReadyRunningReadyWithBothEvents) {
     EXPECT_EQ(seen[1].to, kReady);
     EXPECT_EQ(seen[0].source, delay);
     EXPECT_EQ(a.stateNumber(s, delay), kReady);
-    Variant result = a.c.readValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}));
+    Variant result =
+        a.c.readValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}));
     ASSERT_TRUE(result.scalar<ua::Int32>());
     EXPECT_EQ(*result.scalar<ua::Int32>(), static_cast<ua::Int32>(SkillResult::Completed));
 }
@@ -178,7 +181,8 @@ TEST(SkillServer, FailureEndsHaltedWithTheReasonAndResetGoesBackToReady) {
     Variant msg = a.c.readValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Message"}}));
     ASSERT_TRUE(msg.scalar<ua::String>());
     EXPECT_EQ(*msg.scalar<ua::String>(), "gripper blocked");
-    Variant result = a.c.readValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}));
+    Variant result =
+        a.c.readValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}));
     EXPECT_EQ(*result.scalar<ua::Int32>(), static_cast<ua::Int32>(SkillResult::Failed));
     // Start is not executable while Halted.
     EXPECT_TRUE(a.call(delay, s.method(delay, "Start")).isBad());
@@ -202,7 +206,8 @@ TEST(SkillServer, HaltStopsARunAtOnceAndSuspendPausesIt) {
     const auto before = std::chrono::steady_clock::now();
     ASSERT_EQ(a.call(delay, s.method(delay, "Halt")), status::Good);
     EXPECT_EQ(a.stateNumber(s, delay), kHalted);
-    Variant result = a.c.readValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}));
+    Variant result =
+        a.c.readValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}));
     EXPECT_EQ(*result.scalar<ua::Int32>(), static_cast<ua::Int32>(SkillResult::Aborted));
     ASSERT_EQ(a.call(delay, s.method(delay, "Reset")), status::Good);
     EXPECT_LT(std::chrono::steady_clock::now() - before, 5s);
@@ -251,8 +256,9 @@ TEST(SkillServer, OnlyTheLockHolderWritesParametersAndCallsMethods) {
     EXPECT_EQ(b.lockCall(s, delay, "RenewLock"), -2);
     EXPECT_EQ(a.c.writeValue(duration, 1.0), status::Good);
     EXPECT_EQ(a.lockCall(s, delay, "RenewLock"), 0);
-    EXPECT_EQ(*a.c.readValue(s.member(delay, {{kDiUri, "Lock"}, {kDiUri, "Locked"}})).scalar<bool>(),
-              true);
+    EXPECT_EQ(
+        *a.c.readValue(s.member(delay, {{kDiUri, "Lock"}, {kDiUri, "Locked"}})).scalar<bool>(),
+        true);
     EXPECT_EQ(a.lockCall(s, delay, "ExitLock"), 0);
     EXPECT_EQ(b.c.writeValue(duration, 2.0), status::Good);
     // BreakLock ends anyone's lock; a closed session gives its lock up.
@@ -266,11 +272,11 @@ TEST(SkillServer, OnlyTheLockHolderWritesParametersAndCallsMethods) {
 TEST(SkillServer, ALockExpiresAfterItsInactiveTime) {
     SkillServer s([](SkillServer& self) {
         self.controller = std::make_unique<server::SkillController>(
-            self.server, server::SkillControllerOptions{.name = "DemoGripper",
-                                                        .maxInactiveLockTime = 200ms});
-        self.controller->add("Delay", server::makeSkill(types::DelaySkillType,
-                                                        {server::declareParameter<double>("DurationMs")},
-                                                        {}));
+            self.server,
+            server::SkillControllerOptions{.name = "DemoGripper", .maxInactiveLockTime = 200ms});
+        self.controller->add(
+            "Delay", server::makeSkill(types::DelaySkillType,
+                                       {server::declareParameter<double>("DurationMs")}, {}));
     });
     Session a(s.server), b(s.server);
     const NodeId delay = s.skill("Delay");
@@ -290,14 +296,14 @@ TEST(SkillServer, AtomicParametrizationUnderARaceOfTwoClients) {
         self.controller = std::make_unique<server::SkillController>(
             self.server, server::SkillControllerOptions{.name = "DemoGripper"});
         auto duration = server::declareParameter<double>("DurationMs");
-        self.controller->add(
-            "Delay", server::makeSkill(types::DelaySkillType, {duration},
-                                       {.execute = [&](server::Execution& run) {
-                                           const double* v = run.value(0).scalar<double>();
-                                           std::lock_guard l(logMutex);
-                                           executed.push_back(v ? *v : -1);
-                                           return server::Outcome::completed();
-                                       }}));
+        self.controller->add("Delay", server::makeSkill(types::DelaySkillType, {duration},
+                                                        {.execute = [&](server::Execution& run) {
+                                                            const double* v =
+                                                                run.value(0).scalar<double>();
+                                                            std::lock_guard l(logMutex);
+                                                            executed.push_back(v ? *v : -1);
+                                                            return server::Outcome::completed();
+                                                        }}));
     });
 #ifdef PNP_SANITIZED_BUILD
     constexpr int kRuns = 200;
@@ -357,8 +363,9 @@ TEST(SkillServer, DeclaredParametersAreCheckedAgainstTheModelAtStartUp) {
         EXPECT_NE(std::string(e.what()).find("Width"), std::string::npos) << e.what();
     }
     try {
-        c.add("Mistyped", server::makeSkill(types::DelaySkillType,
-                                            {server::declareParameter<ua::Int32>("DurationMs")}, {}));
+        c.add("Mistyped",
+              server::makeSkill(types::DelaySkillType,
+                                {server::declareParameter<ua::Int32>("DurationMs")}, {}));
         FAIL() << "a mistyped parameter must be refused";
     } catch (const server::SkillError& e) {
         EXPECT_NE(std::string(e.what()).find("DurationMs"), std::string::npos) << e.what();
@@ -371,9 +378,9 @@ TEST(SkillServer, DeclaredParametersAreCheckedAgainstTheModelAtStartUp) {
     }
     // A refused skill leaves nothing behind; a good one is added.
     EXPECT_FALSE(server.addressSpace().contains(NodeId(1, "Checked.Missing")));
-    EXPECT_NO_THROW(c.add("Delay", server::makeSkill(types::DelaySkillType,
-                                                     {server::declareParameter<double>("DurationMs")},
-                                                     {})));
+    EXPECT_NO_THROW(
+        c.add("Delay", server::makeSkill(types::DelaySkillType,
+                                         {server::declareParameter<double>("DurationMs")}, {})));
 }
 
 TEST(SkillServer, TheControllerImplementsISkillControllerTypeBelowDeviceSet) {
@@ -420,18 +427,17 @@ TEST(SkillServer, BadRequestsGetAStatusAndTheSkillKeepsWorking) {
     // InitLock with a context that is not a String.
     r = a.c.call(s.member(delay, {{kDiUri, "Lock"}}), s.lockMethod(delay, "InitLock"),
                  {Variant(ua::Int32{7})});
-    EXPECT_TRUE(r.status.isBad() || (!r.inputArgumentResults.empty() &&
-                                     r.inputArgumentResults[0].isBad()));
+    EXPECT_TRUE(r.status.isBad() ||
+                (!r.inputArgumentResults.empty() && r.inputArgumentResults[0].isBad()));
     // A parameter of the wrong type, a result variable, a state variable.
     EXPECT_EQ(a.c.writeValue(s.parameter(delay, "DurationMs"), ua::String("soon")),
               status::BadTypeMismatch);
-    EXPECT_TRUE(
-        a.c.writeValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}),
-                       ua::Int32{1})
-            .isBad());
-    EXPECT_TRUE(a.c.writeValue(s.member(delay, {{"", "CurrentState"}}),
-                               ua::LocalizedText("", "Running"))
+    EXPECT_TRUE(a.c.writeValue(s.member(delay, {{"", "FinalResultData"}, {kBaseUri, "Result"}}),
+                               ua::Int32{1})
                     .isBad());
+    EXPECT_TRUE(
+        a.c.writeValue(s.member(delay, {{"", "CurrentState"}}), ua::LocalizedText("", "Running"))
+            .isBad());
     // A DurationMs the skill refuses ends the run Failed with the reason.
     ASSERT_EQ(a.c.writeValue(s.parameter(delay, "DurationMs"), -5.0), status::Good);
     ASSERT_EQ(a.call(delay, s.method(delay, "Start")), status::Good);
@@ -462,12 +468,12 @@ TEST(SkillServer, ThrowingAndStubbornSkillsStayWithinTheStateMachine) {
                                              throw std::runtime_error("axis 3 overheated");
                                          }}));
         self.controller->add(
-            "Stubborn", server::makeSkill(types::DelaySkillType, {},
-                                          {.execute = [&](server::Execution&) {
-                                              for (int i = 0; i < 5000 && !release; ++i)
-                                                  std::this_thread::sleep_for(1ms);
-                                              return server::Outcome::completed();
-                                          }}));
+            "Stubborn",
+            server::makeSkill(types::DelaySkillType, {}, {.execute = [&](server::Execution&) {
+                                  for (int i = 0; i < 5000 && !release; ++i)
+                                      std::this_thread::sleep_for(1ms);
+                                  return server::Outcome::completed();
+                              }}));
     });
     Session a(s.server);
     const NodeId thrower = s.skill("Thrower");
