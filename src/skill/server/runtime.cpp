@@ -85,8 +85,6 @@ ProgramState SkillRuntime::state() const {
     return programStateFromName(fsm_->currentState().browseName.name);
 }
 
-ProgramState SkillRuntime::stateLocked() const { return state(); }
-
 void SkillRuntime::setFinalResult(SkillResult result, const std::string& message) {
     // Start clears it: skipped when it is clear already (two variable writes less per run).
     const bool clear = result == SkillResult::None && message.empty();
@@ -111,7 +109,7 @@ SkillRuntime::Fields SkillRuntime::eventFields(const std::string& message,
 void SkillRuntime::start(const MethodCallContext& ctx, MethodCompletion done) {
     if (!lock_->allows(ctx.sessionId)) return done.fail(status::BadLocked);
     std::unique_lock l(mutex_);
-    if (busy_ || stateLocked() != ProgramState::Ready) return done.fail(status::BadInvalidState);
+    if (busy_ || state() != ProgramState::Ready) return done.fail(status::BadInvalidState);
     // The parameters as they are now: the run never sees a later Write.
     auto& space = server_.addressSpace();
     std::vector<Variant> values;
@@ -137,7 +135,7 @@ void SkillRuntime::start(const MethodCallContext& ctx, MethodCompletion done) {
 void SkillRuntime::halt(const MethodCallContext& ctx, MethodCompletion done) {
     if (!lock_->allows(ctx.sessionId)) return done.fail(status::BadLocked);
     std::unique_lock l(mutex_);
-    const ProgramState s = stateLocked();
+    const ProgramState s = state();
     if (s == ProgramState::Halted) return done.fail(status::BadInvalidState);
     const bool running = s == ProgramState::Running || s == ProgramState::Suspended;
     if (running) {
@@ -156,7 +154,7 @@ void SkillRuntime::halt(const MethodCallContext& ctx, MethodCompletion done) {
 void SkillRuntime::suspend(const MethodCallContext& ctx, MethodCompletion done) {
     if (!lock_->allows(ctx.sessionId)) return done.fail(status::BadLocked);
     std::unique_lock l(mutex_);
-    if (stateLocked() != ProgramState::Running) return done.fail(status::BadInvalidState);
+    if (state() != ProgramState::Running) return done.fail(status::BadInvalidState);
     if (StatusCode st = skill_->onSuspend(); st.isBad()) return done.fail(st);
     suspended_ = true;
     done(fsm_->fire("Suspend", eventFields("", kSeverityNormal)));
@@ -165,7 +163,7 @@ void SkillRuntime::suspend(const MethodCallContext& ctx, MethodCompletion done) 
 void SkillRuntime::resume(const MethodCallContext& ctx, MethodCompletion done) {
     if (!lock_->allows(ctx.sessionId)) return done.fail(status::BadLocked);
     std::unique_lock l(mutex_);
-    if (stateLocked() != ProgramState::Suspended) return done.fail(status::BadInvalidState);
+    if (state() != ProgramState::Suspended) return done.fail(status::BadInvalidState);
     if (StatusCode st = skill_->onResume(); st.isBad()) return done.fail(st);
     suspended_ = false;
     StatusCode st = fsm_->fire("Resume", eventFields("", kSeverityNormal));
@@ -177,7 +175,7 @@ void SkillRuntime::resume(const MethodCallContext& ctx, MethodCompletion done) {
 void SkillRuntime::reset(const MethodCallContext& ctx, MethodCompletion done) {
     if (!lock_->allows(ctx.sessionId)) return done.fail(status::BadLocked);
     std::unique_lock l(mutex_);
-    if (stateLocked() != ProgramState::Halted) return done.fail(status::BadInvalidState);
+    if (state() != ProgramState::Halted) return done.fail(status::BadInvalidState);
     if (StatusCode st = skill_->onReset(); st.isBad()) return done.fail(st);
     if (busy_) {
         // The halted run has not returned yet: Ready once it has (worker thread).
@@ -211,13 +209,12 @@ void SkillRuntime::work(std::stop_token stop) {
 }
 
 void SkillRuntime::finish(const Job& job, Outcome outcome) {
-    std::vector<MethodCompletion> resets;
     {
         std::unique_lock l(mutex_);
         busy_ = false;
         suspended_ = false;
         runs_.fetch_add(1);
-        const ProgramState s = stateLocked();
+        const ProgramState s = state();
         const bool current = job.generation == generation_ && !job.stop.stop_requested() &&
                              (s == ProgramState::Running || s == ProgramState::Suspended);
         if (current) {
@@ -234,12 +231,12 @@ void SkillRuntime::finish(const Job& job, Outcome outcome) {
                 ok ? "Ready" : "Halted",
                 eventFields(outcome.message, ok ? kSeverityNormal : kSeverityFailure));
         }
-        if (!pendingResets_.empty() && stateLocked() == ProgramState::Halted) {
+        if (!pendingResets_.empty() && state() == ProgramState::Halted) {
             intermediate_ = Variant();
             StatusCode st = fsm_->fire("Reset", eventFields("", kSeverityNormal));
             for (auto& done : pendingResets_) done(st);
         }
-        resets.swap(pendingResets_);
+        pendingResets_.clear();
     }
     wake_.notify_all();
 }

@@ -68,7 +68,6 @@ class SkillRuntime : public std::enable_shared_from_this<SkillRuntime> {
     // With mutex_ held.
     void setFinalResult(SkillResult result, const std::string& message);
     Fields eventFields(const std::string& message, ua::UInt16 severity) const;
-    ProgramState stateLocked() const;
 
     ua::server::Server& server_;
     std::shared_ptr<Skill> skill_;
