@@ -90,7 +90,8 @@ int main(int argc, char** argv) {
     app.set_version_flag("--version", "pnp 0.1.0");
     app.footer(
         "Run `pnp ua --help` for the OPC UA tools, `pnp lds --help` and `pnp discover --help` "
-        "for discovery (docs/discovery.md).");
+        "for discovery (docs/discovery.md), `pnp skills --help` and `pnp skill run --help` for "
+        "skills (docs/skills.md).");
 
     std::uint16_t ldsPort = 4840;
     std::string ldsHost = "0.0.0.0";
