@@ -32,6 +32,11 @@ PACKAGES=(
     # discovery interop (tests/discovery/discovery_interop_netns_test.cpp): avahi in a
     # network namespace on a private system bus
     avahi-daemon avahi-utils dbus
+    # middleware evaluation (pnp bench middleware, docs/middleware_bench.md): the peers
+    # each adapter links, the ROS master, load generators and the plotter
+    mosquitto libpaho-mqtt-dev libfastrtps-dev libfastcdr-dev
+    libroscpp-dev libstd-msgs-dev python3-rosmaster
+    stress-ng iperf3 gnuplot-nox
 )
 
 # Node.js: the machine image ships nodesource's nodejs (which bundles npm and

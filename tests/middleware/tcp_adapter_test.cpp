@@ -1,0 +1,64 @@
+// pnp-mw-tcp: server and client as processes on loopback; every payload size intact.
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "adapter_test.hpp"
+
+using pnp::test::ChildProcess;
+using pnp::test::runClient;
+
+namespace {
+
+const std::string kExe = PNP_MW_ADAPTER;
+
+void roundTrip(const std::string& mode) {
+    const std::string port = std::to_string(pnp::test::freeLoopbackPort());
+    ChildProcess server;
+    std::string err;
+    ASSERT_TRUE(server.start({kExe, "server", "--mode", mode, "--port", port},
+                             "/tmp/test_mw_tcp_server.log", err))
+        << err;
+    ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(10), err)) << err;
+    auto r = runClient({kExe, "client", "--mode", mode, "--port", port, "--reps", "20", "--warmup",
+                        "2", "--sizes", "0,1,2,1000,32768,65536"},
+                       60, "/tmp/test_mw_tcp_client.log");
+    ASSERT_EQ(r.exitCode, 0) << r.log;
+    ASSERT_EQ(r.lines.size(), 6u);  // one summary per size
+    EXPECT_NE(r.lines[4].find("\"payload\":32768"), std::string::npos) << r.lines[4];
+    EXPECT_NE(r.lines[4].find("\"n\":20"), std::string::npos) << r.lines[4];
+}
+
+}  // namespace
+
+TEST(MiddlewareTcp, EchoRoundTripsEveryPayloadIntact) { roundTrip("echo"); }
+TEST(MiddlewareTcp, AckAnswersEveryPayloadWithOneByte) { roundTrip("ack"); }
+
+TEST(MiddlewareTcp, ChainCarriesTenStreamsThroughTheNodes) {
+    const int base = pnp::test::freeLoopbackPort();
+    ChildProcess nodes[2];
+    std::string err;
+    // 3 streams x 4 hops = 12 nodes in two processes
+    for (int k = 0; k < 2; ++k) {
+        ASSERT_TRUE(
+            nodes[k].start({kExe, "node", "--port", std::to_string(base), "--first",
+                            std::to_string(k * 6), "--count", "6", "--streams", "3", "--hops", "4"},
+                           "/tmp/test_mw_tcp_node" + std::to_string(k) + ".log", err))
+            << err;
+        ASSERT_TRUE(nodes[k].waitForLine("READY", std::chrono::seconds(10), err)) << err;
+    }
+    auto r = runClient({kExe, "client", "--mode", "chain", "--port", std::to_string(base),
+                        "--streams", "3", "--hops", "4", "--runs", "10"},
+                       60, "/tmp/test_mw_tcp_chain.log");
+    ASSERT_EQ(r.exitCode, 0) << r.log;
+    ASSERT_EQ(r.lines.size(), 1u);
+    EXPECT_NE(r.lines[0].find("\"n\":10"), std::string::npos) << r.lines[0];
+}
+
+TEST(MiddlewareTcp, ClientWithoutServerFailsWithAReason) {
+    const std::string port = std::to_string(pnp::test::freeLoopbackPort());
+    auto r = runClient({kExe, "client", "--port", port, "--timeout-ms", "300"}, 30,
+                       "/tmp/test_mw_tcp_noserver.log");
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.log.find("connect"), std::string::npos) << r.log;
+}
