@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -9,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 #include <thread>
@@ -39,23 +41,21 @@ std::string quoted(const std::string& s) {
 std::string run(const std::vector<std::string>& argv, const fs::path& log, int timeoutSeconds) {
     const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
     if (err < 0) return "cannot open " + log.string();
-    const pid_t pid = ::fork();
-    if (pid < 0) {
+    // posix_spawn, not fork: the caller (the runner) may have threads.
+    std::vector<char*> args;
+    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+    args.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+    posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+    posix_spawn_file_actions_adddup2(&actions, err, 2);
+    pid_t pid = -1;
+    const int rc = ::posix_spawn(&pid, args[0], &actions, nullptr, args.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    if (rc != 0) {
         ::close(err);
-        return "fork failed";
-    }
-    if (pid == 0) {
-        const int devnull = ::open("/dev/null", O_RDWR);
-        if (devnull >= 0) {
-            ::dup2(devnull, 0);
-            ::dup2(devnull, 1);
-        }
-        ::dup2(err, 2);
-        std::vector<char*> args;
-        for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-        args.push_back(nullptr);
-        ::execv(args[0], args.data());
-        _exit(127);
+        return "cannot start " + argv[0] + ": " + std::strerror(rc);
     }
     ::close(err);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(timeoutSeconds);
@@ -108,7 +108,7 @@ std::string renderBoxPlot(const fs::path& gnuplot, const fs::path& plotsDir, con
     {
         std::ofstream d(dat, std::ios::trunc);
         if (!d) return "cannot write " + dat.string();
-        d << "# x whisker_lo q1 median q3 whisker_hi max n outliers (µs), one block per series\n";
+        d << "# x whisker_lo q1 median q3 whisker_hi p99 n outliers (µs), one block per series\n";
         for (std::size_t s = 0; s < series; ++s) {
             d << "# series " << plot.series[s] << "\n";
             bool wrote = false;
@@ -119,10 +119,13 @@ std::string renderBoxPlot(const fs::path& gnuplot, const fs::path& plotsDir, con
                     static_cast<double>(g) +
                     (static_cast<double>(s) - (static_cast<double>(series) - 1) / 2) * slot;
                 d << x << ' ' << b->whiskerLo << ' ' << b->q1 << ' ' << b->median << ' ' << b->q3
-                  << ' ' << b->whiskerHi << ' ' << b->max << ' ' << b->n << ' ' << b->outliers
+                  << ' ' << b->whiskerHi << ' ' << b->p99 << ' ' << b->n << ' ' << b->outliers
                   << '\n';
+                // The range follows whiskers and p99, not the maximum: one scheduler hiccup
+                // of milliseconds would squash every box (the report gives the maximum).
+                const double top = std::max(b->whiskerHi, b->p99);
                 lo = any ? std::min(lo, b->whiskerLo) : b->whiskerLo;
-                hi = any ? std::max(hi, b->max) : b->max;
+                hi = any ? std::max(hi, top) : top;
                 any = wrote = true;
             }
             if (!wrote) d << "nan nan nan nan nan nan nan 0 0\n";  // keeps block indices aligned
@@ -135,9 +138,10 @@ std::string renderBoxPlot(const fs::path& gnuplot, const fs::path& plotsDir, con
 
     std::size_t longest = 0;  // characters of the longest x label
     for (const auto& l : plot.groups) longest = std::max(longest, l.size());
-    const int width = std::clamp(200 + static_cast<int>(groups * series) * 16, 800, 2400);
-    // Labels wider than their group's share of the axis (about 7 px per character) slant.
-    const bool slant = static_cast<double>(longest) * 7.5 >
+    const int width = std::clamp(
+        200 + static_cast<int>(groups * std::max<std::size_t>(series * 16, 56)), 800, 2400);
+    // Labels wider than their group's share of the axis (about 10 px per character) slant.
+    const bool slant = static_cast<double>(longest) * 10 >
                        static_cast<double>(width - 200) / static_cast<double>(groups);
     std::ofstream g(gp, std::ios::trunc);
     if (!g) return "cannot write " + gp.string();
@@ -182,13 +186,13 @@ std::string renderBoxPlot(const fs::path& gnuplot, const fs::path& plotsDir, con
           << "' lw 1.5 title " << quoted(plot.series[s]) << ", \\\n     " << src
           << " using 1:4:4:4:4 with candlesticks lc rgb '" << c << "' lw 2.5 notitle";
     }
-    // Medians as crosses (as in the thesis's figures) and the maximum as a small circle.
+    // Medians as crosses (as in the thesis's figures) and the 99th percentile as a circle.
     for (std::size_t s = 0; s < series; ++s) {
         const std::string src = quoted(dat.string()) + " index " + std::to_string(s);
         g << ", \\\n     " << src << " using 1:4 with points pt 2 ps 0.9 lc rgb 'black' "
           << (s == 0 ? "title 'median'" : "notitle") << ", \\\n     " << src
           << " using 1:7 with points pt 6 ps 0.5 lc rgb '#777777' "
-          << (s == 0 ? "title 'max'" : "notitle");
+          << (s == 0 ? "title '99th percentile'" : "notitle");
     }
     g << "\n";
     g.close();

@@ -394,6 +394,8 @@ struct PlotResult {
     std::string error;  // empty: plots/<name>.png written
     std::size_t samples = 0, outliers = 0;
     bool fromSummary = false;
+    double max = 0;  // the largest sample of all boxes, and where
+    std::string maxWhere;
 };
 
 std::string sizeLabel(std::size_t p) { return std::to_string(p); }
@@ -416,7 +418,7 @@ std::vector<BoxPlot> buildPlots(const Data& d) {
         for (auto s : sizes) p.groups.push_back(sizeLabel(s));
         for (const auto& l : echoLoads) {
             const Run* r = d.find(m, "echo", l);
-            if (!r) continue;
+            if (!r || r->boxes.empty()) continue;
             p.series.push_back(loadLabel(l));
             std::vector<std::optional<Box>> row;
             for (auto s : sizes) {
@@ -782,12 +784,16 @@ fs::path writeReport(const fs::path& dir, const Options& options) {
         if (ec) throw std::runtime_error((dir / "logs").string() + ": " + ec.message());
         for (auto& p : buildPlots(d)) {
             PlotResult r;
-            for (const auto& row : p.boxes)
-                for (const auto& b : row)
-                    if (b) {
+            for (std::size_t s = 0; s < p.boxes.size(); ++s)
+                for (std::size_t g = 0; g < p.boxes[s].size(); ++g)
+                    if (const auto& b = p.boxes[s][g]) {
                         r.samples += b->n;
                         r.outliers += b->outliers;
                         r.fromSummary = r.fromSummary || b->fromSummary;
+                        if (b->max > r.max) {
+                            r.max = b->max;
+                            r.maxWhere = p.series[s] + ", " + p.groups[g];
+                        }
                     }
             r.error = renderBoxPlot(*gnuplot, dir / "plots", p, dir / "logs" / "gnuplot.log");
             r.plot = std::move(p);
@@ -844,9 +850,11 @@ fs::path writeReport(const fs::path& dir, const Options& options) {
       << "RTT is the time from sending a request to receiving its answer, measured by the client "
          "with the steady clock, one sample per request (ACK: 1-byte answer; echo: the payload "
          "back). Box plots: the box spans the quartiles, the line and × mark the median, the "
-         "whiskers reach the furthest sample within 1.5 IQR of the box, ○ marks the maximum; "
-         "samples beyond the whiskers are not drawn one by one (their number is given under "
-         "each plot). Every statistic is computed from every CSV row; nothing is downsampled. "
+         "whiskers reach the furthest sample within 1.5 IQR of the box, ○ marks the 99th "
+         "percentile; samples beyond the whiskers are not drawn one by one (their number and "
+         "the largest sample are given under each plot; the y range follows whiskers and 99th "
+         "percentiles, so that one scheduler hiccup does not squash every box). Every statistic is "
+         "computed from every CSV row; nothing is downsampled. "
          "The y axis is logarithmic where the values span more than a decade.\n\n"
       << "Medians, idle; the issue's target for echo is OPC UA ≤ " << ratio(kTcpTarget)
       << " raw TCP:\n\n";
@@ -861,7 +869,9 @@ fs::path writeReport(const fs::path& dir, const Options& options) {
         }
         o << "### " << p.plot.title << "\n\n![" << p.plot.title << "](plots/" << p.plot.name
           << ".png)\n\n"
-          << p.samples << " samples; " << p.outliers << " beyond the whiskers (not drawn).";
+          << p.samples << " samples; " << p.outliers
+          << " beyond the whiskers (not drawn one by one); ○ = 99th percentile; largest sample "
+          << us(p.max) << " µs (" << p.maxWhere << ").";
         if (p.fromSummary)
             o << " Some boxes come from summary.json (no CSV): their whiskers are min / max.";
         o << "\n\n";
