@@ -81,6 +81,11 @@ TEST_F(ReportTest, WritesTablesFromTheCsvsNextToTheThesisValues) {
     EXPECT_NE(md.find("| MQTT | 5 | 105 | 1006 | 10006 | 17 |"), std::string::npos) << md;
     EXPECT_NE(md.find("| OPC UA C/S | 96 | 196 | 1096 | 10096 | 632 |"), std::string::npos);
     EXPECT_NE(md.find("Gigabit Ethernet"), std::string::npos);
+    // Side by side: ours / thesis; sizes we did not measure are "–".
+    EXPECT_NE(md.find("| Echo | OPC UA C/S = OPC UA cs | idle | 14.0 / 520 | – / 283 |"),
+              std::string::npos)
+        << md;
+    EXPECT_NE(md.find("| Echo | MQTT = MQTT qos0 | idle | 40.0 / 584 |"), std::string::npos);
     // Our overhead.
     EXPECT_NE(md.find("| OPC UA cs | ok | 81 / 52 | 181 / 152 | 1081 / 1052 | 10081 / 10052 | "
                       "512 |"),

@@ -551,6 +551,48 @@ void thesisTable43(std::ostream& o) {
     }
 }
 
+// Our run that stands for a thesis row: its MQTT QoS is not stated (QoS 0 assumed), its ROS
+// used topics, its DDS Fast RTPS over UDP.
+const Run* counterpart(const Data& d, const thesis::RttRow& row) {
+    static const std::map<std::string, Mw> map = {
+        {"OPC UA C/S", {"opcua", "cs"}}, {"MQTT", {"mqtt", "qos0"}}, {"ROS", {"ros", "topic"}},
+        {"DDS", {"dds", "udp"}},         {"TCP", {"tcp", "tcp"}},    {"UDP", {"udp", "udp"}}};
+    const auto it = map.find(row.middleware);
+    if (it == map.end()) return nullptr;
+    const Run* r = d.find(it->second, row.mode, row.load);
+    return r && !r->boxes.empty() ? r : nullptr;
+}
+
+void sideBySide(std::ostream& o, const Data& d) {
+    const auto& sizes = thesis::table43Sizes();
+    std::ostringstream rows;
+    for (const auto& row : thesis::table43()) {
+        const Run* r = counterpart(d, row);
+        if (!r) continue;
+        rows << "| " << (row.mode == "echo" ? "Echo" : "ACK") << " | " << row.middleware << " = "
+             << label(r->mw) << " | " << row.load << " |";
+        for (std::size_t i = 0; i < sizes.size(); ++i) {
+            const auto it = r->boxes.find(static_cast<std::size_t>(sizes[i]));
+            const double t = row.meanUs[i];
+            rows << ' ' << (it == r->boxes.end() ? "–" : us(it->second.mean)) << " / "
+                 << (t < 0 ? "?" : fmt("%.0f", t)) << " |";
+        }
+        rows << "\n";
+    }
+    if (rows.str().empty()) {
+        o << "No run of ours matches a row of the thesis's table.\n";
+        return;
+    }
+    o << "| Mode | Middleware (thesis = ours) | Load |";
+    for (int s : sizes) o << ' ' << s << " |";
+    o << "\n|---|---|---|";
+    for (std::size_t i = 0; i < sizes.size(); ++i) o << "---:|";
+    o << "\n"
+      << rows.str()
+      << "\nThesis MQTT is compared with our QoS 0, ROS with topics, DDS with "
+         "UDP (the thesis does not state its MQTT QoS).\n";
+}
+
 double medianAt(const Run* r, std::size_t s) {
     if (!r) return kNaN;
     const auto it = r->boxes.find(s);
@@ -889,6 +931,8 @@ fs::path writeReport(const fs::path& dir, const Options& options) {
     o << "\n"
       << thesis::table43Note() << " The thesis does not say which MQTT QoS it used; its "
       << "OPC UA P/S rows have no counterpart here.\n";
+    o << "\nOurs next to the thesis (mean µs, ours / thesis), for the rows both have:\n\n";
+    sideBySide(o, d);
     o << "\n## Median RTT in µs\n\n";
     if (sizes.empty())
         o << "No echo / ACK data.\n";
