@@ -56,9 +56,21 @@ std::string masterUri(const Options& o) {
     return o.setting("master", env && *env ? env : "http://127.0.0.1:11311");
 }
 
+// A setting in milliseconds, 1 ms .. 1 h.
+int msSetting(const Options& o, const std::string& key, int fallback) {
+    const std::string v = o.setting(key, std::to_string(fallback));
+    try {
+        std::size_t used = 0;
+        const int ms = std::stoi(v, &used);
+        if (used == v.size() && ms >= 1 && ms <= 3600000) return ms;
+    } catch (const std::exception&) {
+    }
+    throw std::invalid_argument("setting " + key + "=" + v + " is not 1 .. 3600000 ms");
+}
+
 // How long a process waits for the master and for its peers before it gives up.
 milliseconds connectTimeout(const Options& o) {
-    return milliseconds(std::stoi(o.setting("connect-timeout-ms", std::to_string(o.timeoutMs))));
+    return milliseconds(msSetting(o, "connect-timeout-ms", o.timeoutMs));
 }
 
 bool isIpAddress(const std::string& s) {
@@ -217,15 +229,17 @@ class TopicClient final : public driver::Client {
     }
 
   private:
+    // What the subscriber callback touches is declared first: destroyed after the spinner
+    // and the subscriber, also when the constructor throws.
     milliseconds timeout_;
+    std::mutex mutex_;
+    std::condition_variable arrived_;
+    Bytes::ConstPtr reply_;
+    Bytes message_;
     RosNode node_;
     ::ros::AsyncSpinner spinner_;
     ::ros::Publisher publisher_;
     ::ros::Subscriber subscriber_;
-    Bytes message_;
-    std::mutex mutex_;
-    std::condition_variable arrived_;
-    Bytes::ConstPtr reply_;
 };
 
 void runTopicServer(driver::ServerContext& ctx, RosNode& node) {
@@ -493,7 +507,7 @@ void runChainChildren(driver::ServerContext& ctx) {
     for (int k = 0; k < o.count; ++k)
         spawn(children[static_cast<std::size_t>(k)], childArgs(o, o.first + k));
 
-    const milliseconds readyTimeout(std::stoi(o.setting("ready-timeout-ms", "120000")));
+    const milliseconds readyTimeout(msSetting(o, "ready-timeout-ms", 120000));
     const auto deadline = Clock::now() + readyTimeout;
     auto exited = [&]() -> const Child* {
         for (auto& c : children)
@@ -629,15 +643,16 @@ class ChainClient final : public driver::ChainClient {
     }
 
   private:
-    RosNode node_;
-    ::ros::AsyncSpinner spinner_;
-    ::ros::Subscriber sink_;
-    std::map<int, ::ros::Publisher> firsts_;
-    Bytes message_;
+    // What the sink callback touches is declared first (see TopicClient).
     std::mutex mutex_;
     std::condition_variable arrived_;
     std::deque<Bytes::ConstPtr> inbox_;
     std::vector<bool> confirmed_;
+    Bytes message_;
+    RosNode node_;
+    ::ros::AsyncSpinner spinner_;
+    ::ros::Subscriber sink_;
+    std::map<int, ::ros::Publisher> firsts_;
 };
 
 }  // namespace
