@@ -182,6 +182,28 @@ TEST_F(MiddlewareRos, TopicClientWithoutServerFailsWithAReason) {
     EXPECT_NE(r.log.find("no ROS topic server"), std::string::npos) << r.log;
 }
 
+TEST_F(MiddlewareRos, ClientsOfAFrozenServerFailWithinTheirTimeout) {
+    for (const std::string variant : {"topic", "service"}) {
+        ChildProcess server;
+        std::string err;
+        ASSERT_TRUE(server.start(
+            {kExe, "server", "--variant", variant, "--mode", "echo", "--set", masterSet_},
+            "/tmp/test_mw_ros_frozen.log", err))
+            << err;
+        ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(20), err)) << err;
+        ::kill(server.pid(), SIGSTOP);  // registered with the master, but never answers
+        const auto t0 = std::chrono::steady_clock::now();
+        auto r = runClient({kExe, "client", "--variant", variant, "--set", masterSet_,
+                            "--timeout-ms", "500", "--sizes", "2", "--reps", "5"},
+                           30, "/tmp/test_mw_ros_frozen_client.log");
+        const auto took = std::chrono::steady_clock::now() - t0;
+        ::kill(server.pid(), SIGCONT);
+        EXPECT_EQ(r.exitCode, 1) << variant << ": " << r.log;
+        EXPECT_NE(r.log.find("500 ms"), std::string::npos) << variant << ": " << r.log;
+        EXPECT_LT(took, std::chrono::seconds(10)) << variant;
+    }
+}
+
 TEST(MiddlewareRosNoMaster, ClientsWithoutMasterFailWithAReason) {
     // A port nobody listens on: the master is unreachable.
     const std::string master =
