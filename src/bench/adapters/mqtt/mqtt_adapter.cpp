@@ -233,8 +233,7 @@ class Connection {
         // Paho reports a socket error on a QoS 1 publish as success (it would resend after a
         // reconnect): the loss then shows as the failure of the wait for the answer.
         if (rc != MQTTCLIENT_SUCCESS)
-            throw std::runtime_error("publishing to " + topic + " failed: " + pahoError(rc) +
-                                     " - lost the connection to the MQTT broker at " + uri_ + "?");
+            throw std::runtime_error(lostMessage("publishing to " + topic + ": " + pahoError(rc)));
     }
 
     // Without callbacks: the next message, read on this thread; Timeout when the deadline
