@@ -409,7 +409,9 @@ void runChainNodes(driver::ServerContext& ctx) {
     std::vector<std::string> next;
     for (int k = 0; k < o.count; ++k) {
         const int i = o.first + k;
-        nodes.push_back(std::make_unique<Connection>(o, "n" + std::to_string(i), &inbox, k));
+        std::string role = "n";  // not "n" + to_string(i): GCC 12 -O3 warns (-Wrestrict)
+        role += std::to_string(i);
+        nodes.push_back(std::make_unique<Connection>(o, role, &inbox, k));
         nodes.back()->subscribe(chainTopic(prefix, i), qos);
         next.push_back((i + 1) % o.hops == 0 ? prefix + "/chain/sink" : chainTopic(prefix, i + 1));
     }
