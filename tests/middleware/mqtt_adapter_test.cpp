@@ -120,15 +120,19 @@ class Broker {
 bool haveMosquitto() { return pnp::testing::fileExists(kMosquitto); }
 
 struct Case {
-    std::string variant, mode;
+    std::string variant, mode, receive;  // receive: the adapter's setting (sync or callback)
 };
+
+void PrintTo(const Case& c, std::ostream* os) {
+    *os << c.variant << " " << c.mode << " " << c.receive;
+}
 
 class MiddlewareMqttRoundTrip : public ::testing::TestWithParam<Case> {};
 
 TEST_P(MiddlewareMqttRoundTrip, EveryPayloadSizeIntact) {
     if (!haveMosquitto()) GTEST_SKIP() << kMosquitto << " not installed";
-    const auto& [variant, mode] = GetParam();
-    const std::string name = variant + "_" + mode;
+    const auto& [variant, mode, receive] = GetParam();
+    const std::string name = variant + "_" + mode + "_" + receive;
     Broker broker;
     std::string err;
     ASSERT_TRUE(broker.start(name, err)) << err;
@@ -155,10 +159,12 @@ TEST_P(MiddlewareMqttRoundTrip, EveryPayloadSizeIntact) {
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(Variants, MiddlewareMqttRoundTrip,
-                         ::testing::Values(Case{"qos0", "echo"}, Case{"qos0", "ack"},
-                                           Case{"qos1", "echo"}, Case{"qos1", "ack"}),
-                         [](const auto& info) { return info.param.variant + info.param.mode; });
+INSTANTIATE_TEST_SUITE_P(
+    Variants, MiddlewareMqttRoundTrip,
+    ::testing::Values(Case{"qos0", "echo", "sync"}, Case{"qos0", "ack", "sync"},
+                      Case{"qos1", "echo", "sync"}, Case{"qos1", "ack", "sync"},
+                      Case{"qos0", "echo", "callback"}, Case{"qos1", "echo", "callback"}),
+    [](const auto& info) { return info.param.variant + info.param.mode + info.param.receive; });
 
 class MiddlewareMqttChain : public ::testing::TestWithParam<std::string> {};
 
@@ -189,21 +195,22 @@ TEST_P(MiddlewareMqttChain, ThreeStreamsOfFourHopsThroughTwoNodeProcesses) {
 
 INSTANTIATE_TEST_SUITE_P(Variants, MiddlewareMqttChain, ::testing::Values("qos0", "qos1"));
 
-class MiddlewareMqttBrokerDeath : public ::testing::TestWithParam<std::string> {};
+class MiddlewareMqttBrokerDeath
+    : public ::testing::TestWithParam<std::pair<std::string, std::string>> {};
 
 // The broker is killed while the client is in its request loop: the client exits 1 with a
 // reason well within the test's bound, and the server exits non-zero.
 TEST_P(MiddlewareMqttBrokerDeath, ClientAndServerFailWithAReason) {
     if (!haveMosquitto()) GTEST_SKIP() << kMosquitto << " not installed";
-    const std::string variant = GetParam();
-    const std::string name = "death_" + variant;
+    const auto& [variant, receive] = GetParam();
+    const std::string name = "death_" + variant + "_" + receive;
     Broker broker;
     std::string err;
     ASSERT_TRUE(broker.start(name, err)) << err;
     ChildProcess server;
-    ASSERT_TRUE(server.start(
-        {kExe, "server", "--mode", "echo", "--variant", variant, "--port", broker.port()},
-        "/tmp/test_mw_mqtt_" + name + "_server.log", err))
+    ASSERT_TRUE(server.start({kExe, "server", "--mode", "echo", "--variant", variant, "--port",
+                              broker.port(), "--set", "receive=" + receive},
+                             "/tmp/test_mw_mqtt_" + name + "_server.log", err))
         << err;
     ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(10), err)) << err;
     ClientRun r;
@@ -232,7 +239,11 @@ TEST_P(MiddlewareMqttBrokerDeath, ClientAndServerFailWithAReason) {
     EXPECT_NE(server.logTail().find("broker"), std::string::npos) << server.logTail();
 }
 
-INSTANTIATE_TEST_SUITE_P(Variants, MiddlewareMqttBrokerDeath, ::testing::Values("qos0", "qos1"));
+INSTANTIATE_TEST_SUITE_P(Variants, MiddlewareMqttBrokerDeath,
+                         ::testing::Values(std::pair{std::string("qos0"), std::string("sync")},
+                                           std::pair{std::string("qos1"), std::string("sync")},
+                                           std::pair{std::string("qos1"), std::string("callback")}),
+                         [](const auto& info) { return info.param.first + info.param.second; });
 
 TEST(MiddlewareMqtt, ClientWithoutBrokerFailsWithAReason) {
     const std::string port = std::to_string(pnp::testing::freeLoopbackPort());

@@ -6,11 +6,13 @@
 // payload). Every publish and subscription has the variant's QoS (qos0 / qos1). One client
 // per prefix: two clients on the same prefix would see each other's replies.
 //
-// Receiving (setting receive): "callback" (default) - Paho's background thread calls
-// messageArrived, which copies the message into an Inbox and wakes the waiting thread with a
-// condition variable; "sync" - no callbacks, the waiting thread itself reads with
-// MQTTClient_receive. Nothing is published from Paho's thread: MQTTClient_publish may wait
-// there for the socket, and that thread is the one that would have to drain it.
+// Receiving (setting receive) of the request/reply server and client: "sync" (default) - no
+// callbacks, the waiting thread itself reads with MQTTClient_receive; "callback" - Paho's
+// background thread calls messageArrived, which copies the message into an Inbox and wakes
+// the waiting thread with a condition variable. Sync saves that hand-over and measured
+// faster (README.md). Chain nodes always use callbacks (many connections in one process).
+// Nothing is published from Paho's thread: MQTTClient_publish may wait there for the socket,
+// and that thread is the one that would have to drain it.
 //
 // Chain: node i subscribes <prefix>/chain/<i> on a connection of its own and republishes to
 // <prefix>/chain/<i+1>, or, for the last node of a stream, to <prefix>/chain/sink.
@@ -57,7 +59,7 @@ std::string prefixOf(const Options& o) {
 }
 
 bool syncReceive(const Options& o) {
-    const std::string r = o.setting("receive", "callback");
+    const std::string r = o.setting("receive", "sync");
     if (r != "callback" && r != "sync")
         throw std::invalid_argument("setting receive is callback or sync, not " + r);
     return r == "sync";
@@ -184,7 +186,10 @@ class Connection {
             if (rc != MQTTCLIENT_SUCCESS) fail("cannot set the MQTT callbacks", rc);
         }
         MQTTClient_connectOptions c = MQTTClient_connectOptions_initializer;
-        c.keepAliveInterval = 10;
+        // Sync receive answers the broker's keepalive only while waiting: a resting client's
+        // pause must stay well inside it (the broker drops a client after 1.5 intervals).
+        c.keepAliveInterval =
+            static_cast<int>(std::min(3600.0, std::max(60.0, 2 * o.restingMaxPause + 10)));
         c.cleansession = 1;
         // The initializer's reliable = 1 allows one unacknowledged QoS 1 publish; the next
         // publish then waits in MQTTClient_yield, which always takes 100 ms.
@@ -249,7 +254,7 @@ class Connection {
             const int rc = MQTTClient_receive(handle_, &topic, &topicLen, &m,
                                               static_cast<unsigned long>(left.count()));
             if (rc != MQTTCLIENT_SUCCESS && rc != MQTTCLIENT_TOPICNAME_TRUNCATED) {
-                failure = lostMessage(pahoError(rc));
+                failure = lostMessage("MQTTClient_receive: " + pahoError(rc));
                 return Inbox::Result::Failed;
             }
             if (!m) {
