@@ -5,8 +5,11 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <iostream>
+#include <sstream>
 
 #include "adapter_test.hpp"
+#include "support/netns.hpp"
 
 using pnp::test::runClient;
 using pnp::testing::ChildProcess;  // tests/support/child_process.hpp
@@ -70,6 +73,48 @@ void chain(const std::string& variant) {
     EXPECT_NE(r.lines[0].find("\"payload\":10240,"), std::string::npos) << r.lines[0];
 }
 
+// UDP datagrams received in a network namespace so far (/proc/net/snmp, Udp: InDatagrams).
+long udpInDatagrams(const std::string& ns) {
+    FILE* p = ::popen(("ip netns exec " + ns + " cat /proc/net/snmp").c_str(), "r");
+    if (!p) return -1;
+    std::vector<std::string> udp;
+    char buf[1024];
+    while (std::fgets(buf, sizeof buf, p))
+        if (std::string(buf).rfind("Udp: ", 0) == 0) udp.emplace_back(buf);
+    ::pclose(p);
+    if (udp.size() < 2) return -1;  // header line, value line
+    std::istringstream names(udp[0]), values(udp[1]);
+    std::string name, value;
+    while (names >> name && values >> value)
+        if (name == "InDatagrams") return std::stol(value);
+    return -1;
+}
+
+// Chain of 3 streams x 4 hops, all 12 nodes in ONE process, `udp`, in a namespace of its own
+// (so nothing else is counted): the UDP datagrams received during `runs` chain runs.
+long chainDatagramsInOneProcess(const std::string& intraprocess, int runs) {
+    pnp::testing::Lab lab;
+    const std::string ns = lab.host("dds");
+    ChildProcess nodes;
+    std::string err;
+    const std::vector<std::string> common = {
+        "--variant", "udp",    "--set", domainSetting(), "--streams",
+        "3",         "--hops", "4",     "--set",         "intraprocess=" + intraprocess};
+    std::vector<std::string> node = {kExe, "node", "--first", "0", "--count", "12"};
+    node.insert(node.end(), common.begin(), common.end());
+    EXPECT_TRUE(nodes.start(node, logPath("intra_nodes"), err, ns)) << err;
+    EXPECT_TRUE(nodes.waitForLine("READY", std::chrono::seconds(10), err)) << err;
+    const long before = udpInDatagrams(ns);
+    std::vector<std::string> client = {"ip",     "netns",  "exec",  ns,       kExe,
+                                       "client", "--mode", "chain", "--runs", std::to_string(runs)};
+    client.insert(client.end(), common.begin(), common.end());
+    auto r = runClient(client, 60, logPath("intra_client"));
+    EXPECT_EQ(r.exitCode, 0) << r.log;
+    const long after = udpInDatagrams(ns);
+    EXPECT_GE(before, 0);
+    return after - before;
+}
+
 }  // namespace
 
 TEST(MiddlewareDds, UdpEchoRoundTripsEveryPayloadIntact) { roundTrip("udp", "echo"); }
@@ -96,4 +141,51 @@ TEST(MiddlewareDds, ChainClientWithoutNodesFailsWithAReason) {
                        30, logPath("nonodes"));
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.log.find("no DDS peer matched within 500 ms"), std::string::npos) << r.log;
+}
+
+// Fast DDS would hand samples between the participants of one process directly; the adapter
+// turns that off, so every one of the 5 hops of a stream (client -> 4 nodes -> client) is a
+// datagram. The same run with intra-process delivery on is the control: it must count fewer.
+TEST(MiddlewareDds, ChainNodesInOneProcessTalkOverTheTransport) {
+    if (!pnp::testing::canCreateNetworkNamespaces())
+        GTEST_SKIP() << "needs root and iproute2 (network namespaces); CI runs as root";
+    constexpr int kRuns = 100;
+    const long hops = 3L * 5 * (kRuns + 2);  // streams x hops x (runs + the driver's 2 warm-up)
+    const long off = chainDatagramsInOneProcess("off", kRuns);
+    const long full = chainDatagramsInOneProcess("full", kRuns);
+    std::cout << "UDP datagrams received in " << kRuns + 2 << " chain runs: intra-process off "
+              << off << ", full " << full << " (" << hops << " hops)" << std::endl;
+    EXPECT_GE(off, hops) << "intra-process off: " << off << ", on: " << full;
+    EXPECT_LT(full, hops) << "intra-process off: " << off << ", on: " << full;
+}
+
+// As the runner places them: server and client on two hosts (network namespaces on one
+// segment, no multicast route), discovery by unicast to --host from --local.
+TEST(MiddlewareDds, ClientAndServerOnTwoHostsFindEachOtherByUnicast) {
+    if (!pnp::testing::canCreateNetworkNamespaces())
+        GTEST_SKIP() << "needs root and iproute2 (network namespaces); CI runs as root";
+    pnp::testing::Lab lab;
+    lab.segment("lan");
+    lab.attach("server", "lan", "eth0", "10.77.0.1/24");
+    lab.attach("client", "lan", "eth0", "10.77.0.2/24");
+    for (const std::string variant : {"udp", "shm"}) {
+        const std::string domain = domainSetting();
+        ChildProcess server;
+        std::string err;
+        ASSERT_TRUE(server.start({kExe, "server", "--variant", variant, "--mode", "echo", "--host",
+                                  "10.77.0.1", "--set", domain},
+                                 logPath("netns_server"), err, lab.host("server")))
+            << err;
+        ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(10), err)) << err;
+        auto r = runClient({"ip",      "netns",     "exec",    lab.host("client"), kExe,
+                            "client",  "--variant", variant,   "--mode",           "echo",
+                            "--host",  "10.77.0.1", "--local", "10.77.0.2",        "--set",
+                            domain,    "--reps",    "20",      "--warmup",         "2",
+                            "--sizes", "0,2,32768"},
+                           60, logPath("netns_client"));
+        ASSERT_EQ(r.exitCode, 0) << variant << ": " << r.log;
+        ASSERT_EQ(r.lines.size(), 3u) << variant;
+        EXPECT_NE(r.lines[2].find("\"payload\":32768,"), std::string::npos) << r.lines[2];
+        EXPECT_NE(r.lines[2].find("\"n\":20,"), std::string::npos) << r.lines[2];
+    }
 }
