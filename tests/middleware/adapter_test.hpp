@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "child_process.hpp"
+#include "support/child_process.hpp"
 
-namespace pnp::test {
+namespace pnp::testing {
 
 struct ClientRun {
     int exitCode = -1;
@@ -55,4 +55,4 @@ inline ClientRun runClient(const std::vector<std::string>& argv, int seconds,
     return r;
 }
 
-}  // namespace pnp::test
+}  // namespace pnp::testing

@@ -5,15 +5,15 @@
 
 #include "adapter_test.hpp"
 
-using pnp::test::ChildProcess;
-using pnp::test::runClient;
+using pnp::testing::ChildProcess;
+using pnp::testing::runClient;
 
 namespace {
 
 const std::string kExe = PNP_MW_ADAPTER;
 
 void roundTrip(const std::string& mode) {
-    const std::string port = std::to_string(pnp::test::freeLoopbackPort());
+    const std::string port = std::to_string(pnp::testing::freeLoopbackPort());
     ChildProcess server;
     std::string err;
     ASSERT_TRUE(server.start({kExe, "server", "--mode", mode, "--port", port},
@@ -35,7 +35,7 @@ TEST(MiddlewareTcp, EchoRoundTripsEveryPayloadIntact) { roundTrip("echo"); }
 TEST(MiddlewareTcp, AckAnswersEveryPayloadWithOneByte) { roundTrip("ack"); }
 
 TEST(MiddlewareTcp, ChainCarriesTenStreamsThroughTheNodes) {
-    const int base = pnp::test::freeLoopbackPort();
+    const int base = pnp::testing::freeLoopbackPort();
     ChildProcess nodes[2];
     std::string err;
     // 3 streams x 4 hops = 12 nodes in two processes
@@ -56,7 +56,7 @@ TEST(MiddlewareTcp, ChainCarriesTenStreamsThroughTheNodes) {
 }
 
 TEST(MiddlewareTcp, ClientWithoutServerFailsWithAReason) {
-    const std::string port = std::to_string(pnp::test::freeLoopbackPort());
+    const std::string port = std::to_string(pnp::testing::freeLoopbackPort());
     auto r = runClient({kExe, "client", "--port", port, "--timeout-ms", "300"}, 30,
                        "/tmp/test_mw_tcp_noserver.log");
     EXPECT_EQ(r.exitCode, 1);

@@ -374,6 +374,9 @@ int adapterMain(int argc, char** argv, const Adapter& a) {
             o.streams < 1 || o.streams > 1000 || o.hops < 1 || o.hops > 100000 || o.runs < 0 ||
             o.runs > 1000000 || o.count < 1 || o.first < 0 || o.timeoutMs < 1)
             throw std::invalid_argument("a count is out of range");
+        // Chain messages are told apart by their content: they need a few bytes.
+        if (o.chainPayload < 8 || o.chainPayload > (64u << 20))
+            throw std::invalid_argument("--chain-payload must be 8 B .. 64 MiB");
         pin(o.cpu);
     } catch (const std::exception& e) {
         std::cerr << "pnp-mw-" << a.name << ": " << e.what() << std::endl;

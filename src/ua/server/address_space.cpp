@@ -843,9 +843,13 @@ void AddressSpace::deleteNode(const NodeId& id, bool deleteChildren) {
     impl_->deleteNode(i, deleteChildren);
 }
 
+std::uint64_t AddressSpace::structureGeneration() const {
+    return impl_->structureGeneration.load(std::memory_order_acquire);
+}
+
 // ---- application API: values ---------------------------------------------------------------
 StatusCode AddressSpace::setValue(const NodeId& variable, DataValue value) {
-    auto lock = impl_->lockForChange();
+    auto lock = impl_->lockForValueChange();
     Impl& s = *impl_;
     NodeIndex i = s.find(variable);
     if (i == kNoNode) return status::BadNodeIdUnknown;
@@ -871,7 +875,7 @@ DataValue AddressSpace::readValue(const NodeId& variable) const {
 }
 
 void AddressSpace::setValueCallback(const NodeId& variable, ValueCallbacks callbacks) {
-    auto lock = impl_->lockForChange();
+    auto lock = impl_->lockForValueChange();
     Impl& s = *impl_;
     NodeIndex i = need(s, variable, status::BadNodeIdUnknown, "variable");
     Node& n = s.nodes[i];
@@ -885,12 +889,12 @@ void AddressSpace::setValueCallback(const NodeId& variable, ValueCallbacks callb
 }
 
 void AddressSpace::setValueListener(ValueListener listener) {
-    auto lock = impl_->lockForChange();
+    auto lock = impl_->lockForValueChange();
     impl_->valueListener = std::move(listener);
 }
 
 StatusCode AddressSpace::setExecutable(const NodeId& method, bool executable) {
-    auto lock = impl_->lockForChange();
+    auto lock = impl_->lockForValueChange();
     Impl& s = *impl_;
     NodeIndex i = s.find(method);
     if (i == kNoNode) return status::BadNodeIdUnknown;
@@ -901,7 +905,7 @@ StatusCode AddressSpace::setExecutable(const NodeId& method, bool executable) {
 }
 
 void AddressSpace::setMethodHandler(const NodeId& method, MethodHandler handler) {
-    auto lock = impl_->lockForChange();
+    auto lock = impl_->lockForValueChange();
     Impl& s = *impl_;
     NodeIndex i = needClass(s, method, NodeClassBits::Method, status::BadMethodInvalid, "method");
     if (handler)

@@ -327,6 +327,9 @@ class AddressSpace {
     // Deletes the node and every reference to or from it; with deleteChildren also the nodes
     // it aggregates (HasComponent / HasProperty / ..., recursively).
     void deleteNode(const NodeId& id, bool deleteChildren = true);
+    // Changes whenever nodes or references are added or removed (not on value or attribute
+    // writes): a cache of something derived from the graph is valid while it stays the same.
+    std::uint64_t structureGeneration() const;
 
     // ---- application API: values ------------------------------------------------------
     // Sets a Variable's value without access checks but with the type check (returns

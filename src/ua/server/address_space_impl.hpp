@@ -4,6 +4,7 @@
 // method_services.cpp: Call). Not part of the public API.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <memory>
 #include <mutex>
@@ -31,7 +32,17 @@ struct AddressSpace::Impl {
     // Bumped by every change made under the exclusive lock (see lockForChange()); what is
     // derived from the nodes and cached (method arguments) is valid for one generation.
     std::uint64_t changeGeneration = 0;
+    // Bumped by changes of nodes and references (not by value / attribute writes): what is
+    // derived from the graph alone (event type chains, notifier paths) is valid for one.
+    std::atomic<std::uint64_t> structureGeneration{0};
     std::unique_lock<std::shared_mutex> lockForChange() {
+        std::unique_lock lock(mutex);
+        ++changeGeneration;
+        structureGeneration.fetch_add(1, std::memory_order_release);
+        return lock;
+    }
+    // For writes of values and attributes, which leave the graph as it is.
+    std::unique_lock<std::shared_mutex> lockForValueChange() {
         std::unique_lock lock(mutex);
         ++changeGeneration;
         return lock;

@@ -727,14 +727,14 @@ WriteResponse AddressSpace::write(const WriteRequest& request) {
         return response;
     }
     response.results.reserve(request.nodesToWrite.size());
-    auto lock = impl_->lockForChange();
+    auto lock = impl_->lockForValueChange();
     for (const auto& item : request.nodesToWrite)
         response.results.push_back(impl_->writeAttribute(lock, item, true));
     return response;
 }
 
 StatusCode AddressSpace::write(const WriteValue& item) {
-    auto lock = impl_->lockForChange();
+    auto lock = impl_->lockForValueChange();
     return impl_->writeAttribute(lock, item, true);
 }
 
@@ -744,7 +744,7 @@ StatusCode AddressSpace::writeAttribute(const NodeId& id, AttributeId attribute,
     item.nodeId = id;
     item.attributeId = static_cast<UInt32>(attribute);
     item.value = DataValue(value);
-    auto lock = impl_->lockForChange();
+    auto lock = impl_->lockForValueChange();
     return impl_->writeAttribute(lock, item, true);
 }
 

@@ -96,6 +96,41 @@ struct FiniteStateMachine::Impl {
     std::optional<std::size_t> last;
     TransitionObserver observer;
 
+    // What every event of a transition carries, built on its first use (each event copies it
+    // instead of building names, texts and the message again).
+    struct EventTemplate {
+        NodeId eventType;
+        LocalizedText message;
+        Fields fields;  // Transition, FromState, ToState with their Id and Number
+    };
+    std::vector<std::optional<EventTemplate>> eventTemplates;
+
+    const EventTemplate& eventTemplate(std::size_t t) {
+        if (eventTemplates.size() != transitions.size()) eventTemplates.resize(transitions.size());
+        auto& slot = eventTemplates[t];
+        if (slot) return *slot;
+        const Transition& tr = transitions[t];
+        const State& fs = states[tr.from];
+        const State& ts = states[tr.to];
+        EventTemplate e;
+        e.eventType = !options.eventType.isNull() ? options.eventType
+                      : !tr.eventType.isNull()    ? tr.eventType
+                                                  : NodeId(0, ns0::TransitionEventType);
+        e.message = LocalizedText("", machineName + ": " + fs.displayName.text + " -> " +
+                                          ts.displayName.text + " (" + tr.displayName.text + ")");
+        e.fields.reserve(9);
+        auto add = [&](const char* var, const LocalizedText& text, const NodeId& id, UInt32 n) {
+            e.fields.push_back({{ns0Name(var)}, Variant(text)});
+            e.fields.push_back({{ns0Name(var), ns0Name("Id")}, Variant(id)});
+            e.fields.push_back({{ns0Name(var), ns0Name("Number")}, Variant(n)});
+        };
+        add("Transition", tr.displayName, tr.node, tr.number);
+        add("FromState", fs.displayName, fs.node, fs.number);
+        add("ToState", ts.displayName, ts.node, ts.number);
+        slot = std::move(e);
+        return *slot;
+    }
+
     // ---- setup ----------------------------------------------------------------------------
     [[noreturn]] void fail(const std::string& what) const {
         throw StateMachineError("state machine " + machine.toString() + ": " + what);
@@ -370,23 +405,15 @@ struct FiniteStateMachine::Impl {
 
         const State& fs = states[from];
         const State& ts = states[tr.to];
+        const EventTemplate& tmpl = eventTemplate(t);
         Event e;
-        e.eventType = !options.eventType.isNull() ? options.eventType
-                      : !tr.eventType.isNull()    ? tr.eventType
-                                                  : NodeId(0, ns0::TransitionEventType);
+        e.eventType = tmpl.eventType;
         e.sourceNode = machine;
         e.sourceName = machineName;
         e.severity = options.eventSeverity;
-        e.message = LocalizedText("", machineName + ": " + fs.displayName.text + " -> " +
-                                          ts.displayName.text + " (" + tr.displayName.text + ")");
-        auto add = [&](const char* var, const LocalizedText& text, const NodeId& id, UInt32 n) {
-            e.fields.push_back({{ns0Name(var)}, Variant(text)});
-            e.fields.push_back({{ns0Name(var), ns0Name("Id")}, Variant(id)});
-            e.fields.push_back({{ns0Name(var), ns0Name("Number")}, Variant(n)});
-        };
-        add("Transition", tr.displayName, tr.node, tr.number);
-        add("FromState", fs.displayName, fs.node, fs.number);
-        add("ToState", ts.displayName, ts.node, ts.number);
+        e.message = tmpl.message;
+        e.fields.reserve(tmpl.fields.size() + extra.size());
+        e.fields = tmpl.fields;
         for (auto& f : extra) {
             // Message and Severity given by the caller replace the defaults.
             if (f.first.size() == 1 && f.first[0].namespaceIndex == 0) {

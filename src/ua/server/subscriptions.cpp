@@ -4,7 +4,10 @@
 #include <atomic>
 #include <cmath>
 #include <deque>
+#include <memory>
+#include <mutex>
 #include <random>
+#include <unordered_map>
 #include <variant>
 
 #include "ua/types/attribute_id.hpp"
@@ -133,11 +136,11 @@ struct CompiledEventFilter {
 struct EventRecord {
     Event event;
     DateTime receiveTime;
-    std::vector<NodeId> typeChain;  // the event type and its supertypes
+    std::shared_ptr<const std::vector<NodeId>> typeChain;  // the event type and its supertypes
 };
 
 bool hasType(const EventRecord& e, const NodeId& type) {
-    return std::find(e.typeChain.begin(), e.typeChain.end(), type) != e.typeChain.end();
+    return std::find(e.typeChain->begin(), e.typeChain->end(), type) != e.typeChain->end();
 }
 
 Variant fieldValue(const EventRecord& r, const FieldRef& f) {
@@ -1151,6 +1154,42 @@ struct SubscriptionEngine::Impl {
         if (std::find(seen.begin(), seen.end(), server) == seen.end()) seen.push_back(server);
         return seen;
     }
+
+    // Type chains and notifier paths of the event types and sources seen, for one structure
+    // generation of the address space (a handful of Browses per event otherwise). The
+    // generation is read before computing: a change during the computation invalidates it.
+    struct EventPaths {
+        std::mutex mutex;
+        std::uint64_t generation = ~std::uint64_t{0};
+        std::unordered_map<NodeId, std::shared_ptr<const std::vector<NodeId>>> typeChains;
+        std::unordered_map<NodeId, std::shared_ptr<const std::vector<NodeId>>> notifiers;
+    };
+    mutable EventPaths eventPaths;
+    static constexpr std::size_t kMaxCachedPaths = 4096;  // bounded: sources come from users
+
+    using Paths = std::shared_ptr<const std::vector<NodeId>>;
+    Paths cachedPath(bool typeChainOf, const NodeId& node) const {
+        const std::uint64_t gen = as.structureGeneration();
+        auto& map = typeChainOf ? eventPaths.typeChains : eventPaths.notifiers;
+        {
+            std::lock_guard lock(eventPaths.mutex);
+            if (eventPaths.generation != gen) {
+                eventPaths.typeChains.clear();
+                eventPaths.notifiers.clear();
+                eventPaths.generation = gen;
+            }
+            auto it = map.find(node);
+            if (it != map.end()) return it->second;
+        }
+        auto path = std::make_shared<const std::vector<NodeId>>(typeChainOf ? typeChain(node)
+                                                                            : notifiersOf(node));
+        std::lock_guard lock(eventPaths.mutex);
+        if (eventPaths.generation == gen) {
+            if (map.size() >= kMaxCachedPaths) map.clear();
+            map.emplace(node, path);
+        }
+        return path;
+    }
 };
 
 SubscriptionEngine::SubscriptionEngine(AddressSpace& addressSpace, SubscriptionLimits limits,
@@ -1637,14 +1676,14 @@ void SubscriptionEngine::fireEvent(Event event) {
     if (!event.time) event.time = DateTime::now();
     EventRecord r;
     r.receiveTime = DateTime::now();
-    r.typeChain = m.typeChain(event.eventType);
+    r.typeChain = m.cachedPath(true, event.eventType);
     r.event = std::move(event);
-    std::vector<NodeId> notifiers = m.notifiersOf(r.event.sourceNode);
+    const Impl::Paths notifiers = m.cachedPath(false, r.event.sourceNode);
 
     std::lock_guard lock(m.mutex);
     auto now = Clock::now();
     std::vector<Subscription*> touched;
-    for (const NodeId& n : notifiers) {
+    for (const NodeId& n : *notifiers) {
         auto it = m.eventWatchers.find(n);
         if (it == m.eventWatchers.end()) continue;
         for (MonitoredItem* raw : it->second) {
