@@ -20,7 +20,7 @@
 
 #include "bench/runner/netns.hpp"
 #include "bench/runner/process.hpp"
-#include "child_process.hpp"
+#include "support/child_process.hpp"
 
 namespace fs = std::filesystem;
 using Json = nlohmann::json;

@@ -170,6 +170,8 @@ struct Peer {
     std::string uri;
 };
 
+constexpr int kPilotReps = 5;
+
 struct Settings {
     int reps = 5000, repsUnderLoad = 1000, warmup = 100;
     std::vector<std::size_t> sizes;
@@ -179,6 +181,10 @@ struct Settings {
     int chainStreams = 10, chainHops = 50, chainRuns = 100;
     std::size_t chainPayload = 10240;
     int overheadReps = 100;
+    // Seconds one ACK / Echo run may take (estimated by a pilot); a slower middleware gets
+    // fewer reps, at least minReps.
+    double runBudgetIdle = 40, runBudgetLoad = 30;
+    int minReps = 20;
     std::vector<std::string> loads, modes;
 };
 
@@ -254,6 +260,10 @@ void Runner::settle() {
         s_.chainRuns = 10;
     }
     s_.overheadReps = q ? 10 : 100;
+    if (q) {
+        s_.runBudgetIdle = s_.runBudgetLoad = 4;
+        s_.minReps = 10;
+    }
     s_.loads = o.loads.empty() ? (q ? std::vector<std::string>{"idle"}
                                     : std::vector<std::string>{"idle", "cpu", "net"})
                                : o.loads;
@@ -424,7 +434,8 @@ Json Runner::runOne(const AdapterInfo& a, const std::string& variant, const std:
                 {"load", load},      {"status", "failed"},     {"reason", ""},
                 {"csv", csvRel},     {"sizes", Json::array()}, {"resources", nullptr}};
     const auto t0 = std::chrono::steady_clock::now();
-    const int reps = load == "idle" ? s_.reps : s_.repsUnderLoad;
+    int reps = load == "idle" ? s_.reps : s_.repsUnderLoad;
+    int warmup = s_.warmup;
     const int port = usesPort(a) ? freePort() : 0;
     const int domain = nextDomain();
     // The server: resting uses an ACK server.
@@ -443,6 +454,57 @@ Json Runner::runOne(const AdapterInfo& a, const std::string& variant, const std:
         run["reason"] = "server not ready: " + error;
         return run;
     }
+    std::string note;
+    if (mode != "resting") {
+        // Pilot: a few requests per size estimate the run's time; a middleware that is far
+        // slower than the rest gets fewer reps, so that the whole evaluation keeps its budget.
+        Spawn ps;
+        ps.argv = {a.exe, "client", "--mode", mode};
+        auto pa = addressing(a, variant, site.serverAddr, site.clientAddr, port, peer, domain,
+                             s_.clientCpu);
+        ps.argv.insert(ps.argv.end(), pa.begin(), pa.end());
+        const std::vector<std::string> po = {
+            "--reps",  std::to_string(kPilotReps), "--warmup",     "1",
+            "--sizes", joinNumbers(s_.sizes),      "--timeout-ms", "10000"};
+        ps.argv.insert(ps.argv.end(), po.begin(), po.end());
+        ps.log = log(tag + "-pilot.log");
+        ps.netns = site.clientNs;
+        ps.env = env(a, site.clientAddr, peer);
+        auto pilot = Process::start(ps);
+        const auto pilotEnd = std::chrono::steady_clock::now() + 120s;
+        while (!pilot->exited() && std::chrono::steady_clock::now() < pilotEnd) {
+            if (stopRequested()) throw Interrupted();
+            pilot->pump();
+            server->pump();
+            std::this_thread::sleep_for(20ms);
+        }
+        pilot->stop(500ms);
+        double perRepUs = 0;  // one request of every size
+        for (const auto& l : pilot->lines()) {
+            try {
+                const Json j = Json::parse(l);
+                perRepUs += j.value("mean_us", 0.0);
+            } catch (const std::exception&) {
+            }
+        }
+        const double estimate = perRepUs * (reps + warmup) / 1e6;
+        const double budget = load == "idle" ? s_.runBudgetIdle : s_.runBudgetLoad;
+        if (pilot->exitCode() == 0 && estimate > budget) {
+            const int fewer = std::max(s_.minReps, static_cast<int>(reps * budget / estimate));
+            if (fewer < reps) {
+                std::ostringstream n;
+                n.precision(1);
+                n << std::fixed << "reps reduced from " << reps << " to " << fewer
+                  << ": a pilot of " << kPilotReps << " requests per size estimated " << estimate
+                  << " s, over the run budget of " << budget << " s";
+                note = n.str();
+                warmup = std::min(warmup, std::max(1, fewer / 10));
+                reps = fewer;
+            }
+        }
+    }
+    run["reps"] = reps;
+    run["note"] = note;
     Spawn cs;
     cs.argv = {a.exe, "client", "--mode", mode};
     addr =
@@ -451,7 +513,7 @@ Json Runner::runOne(const AdapterInfo& a, const std::string& variant, const std:
     const std::vector<std::string> clientOpts = {"--reps",
                                                  std::to_string(reps),
                                                  "--warmup",
-                                                 std::to_string(s_.warmup),
+                                                 std::to_string(warmup),
                                                  "--sizes",
                                                  mode == "resting" ? "4" : joinNumbers(s_.sizes),
                                                  "--csv",
@@ -468,7 +530,7 @@ Json Runner::runOne(const AdapterInfo& a, const std::string& variant, const std:
     cs.env = env(a, site.clientAddr, peer);
     // Bound: generous against slow middlewares, a hang still ends.
     const double requests = mode == "resting" ? 0
-                                              : static_cast<double>(reps + s_.warmup) *
+                                              : static_cast<double>(reps + warmup) *
                                                     static_cast<double>(s_.sizes.size());
     const auto limit = std::chrono::seconds(120) +
                        std::chrono::milliseconds(static_cast<long>(requests * 20)) +
@@ -546,7 +608,8 @@ Json Runner::runOne(const AdapterInfo& a, const std::string& variant, const std:
     line.precision(1);
     line << std::fixed << "[" << ++runIndex_ << "/" << runTotal_ << "] " << load << " " << a.name
          << "/" << variant << " " << mode << ": " << (reason.empty() ? "ok" : "FAILED") << " ("
-         << secs << " s) " << (reason.empty() ? describeSizes(sizes) : reason.substr(0, 300));
+         << secs << " s) " << (reason.empty() ? describeSizes(sizes) : reason.substr(0, 300))
+         << (note.empty() ? "" : " [" + note + "]");
     say(line.str());
     return run;
 }
@@ -566,6 +629,7 @@ struct LoadScope {
 
 void Runner::runLoad(const std::string& load) {
     LoadScope scope;
+    fs::create_directories(out_ / "logs" / load);
     const std::string loadLog = log(load + "-load.log");
     if (load == "cpu") {
         const std::string exe = findExecutable("stress-ng");
@@ -1062,20 +1126,23 @@ fs::path Runner::run() {
                 {"overhead", Json::array()}};
     Json cpus = nullptr;
     if (s_.clientCpu >= 0) cpus = {{"client", s_.clientCpu}, {"server", s_.serverCpu}};
-    summary_["settings"] = {{"reps", s_.reps},
-                            {"reps_under_load", s_.repsUnderLoad},
-                            {"warmup", s_.warmup},
-                            {"sizes", s_.sizes},
-                            {"placement", s_.placement},
-                            {"cpus", cpus},
-                            {"resting_seconds", s_.restingSeconds},
-                            {"resting_max_pause_s", s_.restingMaxPause},
-                            {"loads", s_.loads},
-                            {"modes", s_.modes},
-                            {"cpu_load", ""},
-                            {"net_load", ""},
-                            {"chain", options_.chain},
-                            {"overhead", options_.overhead && !options_.quick}};
+    summary_["settings"] = {
+        {"reps", s_.reps},
+        {"reps_under_load", s_.repsUnderLoad},
+        {"warmup", s_.warmup},
+        {"sizes", s_.sizes},
+        {"placement", s_.placement},
+        {"cpus", cpus},
+        {"resting_seconds", s_.restingSeconds},
+        {"resting_max_pause_s", s_.restingMaxPause},
+        {"run_budget_s", {{"idle", s_.runBudgetIdle}, {"load", s_.runBudgetLoad}}},
+        {"min_reps", s_.minReps},
+        {"loads", s_.loads},
+        {"modes", s_.modes},
+        {"cpu_load", ""},
+        {"net_load", ""},
+        {"chain", options_.chain},
+        {"overhead", options_.overhead && !options_.quick}};
     discover();
     int variants = 0;
     for (const auto& a : adapters_)
