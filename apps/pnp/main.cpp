@@ -3,12 +3,18 @@
 #include <signal.h>
 
 #include <CLI/CLI.hpp>
+#include <functional>
 #include <iostream>
 
 #include "commands.hpp"
 #include "output.hpp"
 #include "ua/client/error.hpp"
 #include "value_text.hpp"
+
+namespace pnp::cli {
+// bench_commands.cpp: adds `pnp bench ...`; the function runs the parsed one (-1: none).
+std::function<int()> addBenchCommands(CLI::App& app);
+}  // namespace pnp::cli
 
 namespace {
 
@@ -91,7 +97,8 @@ int main(int argc, char** argv) {
     app.footer(
         "Run `pnp ua --help` for the OPC UA tools, `pnp lds --help` and `pnp discover --help` "
         "for discovery (docs/discovery.md), `pnp skills --help` and `pnp skill run --help` for "
-        "skills (docs/skills.md).");
+        "skills (docs/skills.md), `pnp bench middleware --help` for the middleware evaluation "
+        "(docs/middleware_bench.md).");
 
     std::uint16_t ldsPort = 4840;
     std::string ldsHost = "0.0.0.0";
@@ -310,6 +317,8 @@ int main(int argc, char** argv) {
     events->add_option("--duration", eventsOpts.durationMs, "stop after MS ms (0: never)");
     events->footer("Runs until Ctrl-C, --count or --duration.");
 
+    const auto runBench = addBenchCommands(app);
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -322,6 +331,7 @@ int main(int argc, char** argv) {
                       (*write && wrOpts.json) || (*call && clOpts.json) ||
                       (*monitor && moOpts.json) || (*events && evOpts.json);
     try {
+        if (const int rc = runBench(); rc >= 0) return rc;
         if (*serve) return runServe(serveOpts);
         if (*demoSkills) return runServe(skillsOpts);
         if (*skillsCmd) return runSkills(skillsListOpts);
