@@ -55,4 +55,30 @@ inline ClientRun runClient(const std::vector<std::string>& argv, int seconds,
     return r;
 }
 
+// Starts argv and waits (bounded) for its READY line; the reason when it does not come.
+inline bool startReady(ChildProcess& p, const std::vector<std::string>& argv,
+                       const std::string& logPath, int seconds, std::string& error) {
+    return p.start(argv, logPath, error) &&
+           p.waitForLine("READY", std::chrono::seconds(seconds), error);
+}
+
+// The small chain of a port-based adapter: 3 streams x 4 hops = 12 nodes in two `node`
+// processes from a free base port, then a chain client of 10 runs. exitCode -1 and
+// `error` when a node process did not get ready.
+inline ClientRun runSmallChain(const std::string& exe, const std::string& name, int readySeconds,
+                               std::string& error) {
+    const std::string base = std::to_string(freeLoopbackPort());
+    ChildProcess nodes[2];
+    for (int k = 0; k < 2; ++k)
+        if (!startReady(nodes[k],
+                        {exe, "node", "--port", base, "--first", std::to_string(k * 6), "--count",
+                         "6", "--streams", "3", "--hops", "4"},
+                        "/tmp/test_mw_" + name + "_node" + std::to_string(k) + ".log", readySeconds,
+                        error))
+            return {};
+    return runClient({exe, "client", "--mode", "chain", "--port", base, "--streams", "3", "--hops",
+                      "4", "--runs", "10"},
+                     60, "/tmp/test_mw_" + name + "_chain.log");
+}
+
 }  // namespace pnp::testing

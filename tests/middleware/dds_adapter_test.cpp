@@ -11,8 +11,8 @@
 #include "adapter_test.hpp"
 #include "support/netns.hpp"
 
-using pnp::test::runClient;
 using pnp::testing::ChildProcess;  // tests/support/child_process.hpp
+using pnp::testing::runClient;
 
 namespace {
 

@@ -6,8 +6,8 @@
 
 #include "adapter_test.hpp"
 
-using pnp::test::runClient;
 using pnp::testing::ChildProcess;
+using pnp::testing::runClient;
 
 namespace {
 
@@ -38,22 +38,10 @@ TEST(MiddlewareOpcua, EchoCallRoundTripsEveryPayloadIntact) { roundTrip("echo");
 TEST(MiddlewareOpcua, AckWriteAnswersEveryPayloadWithOneByte) { roundTrip("ack"); }
 
 TEST(MiddlewareOpcua, ChainCarriesThreeStreamsThroughTheNodes) {
-    const int base = pnp::testing::freeLoopbackPort();
-    ChildProcess nodes[2];
     std::string err;
-    // 3 streams x 4 hops = 12 nodes (servers) in two processes
-    for (int k = 0; k < 2; ++k) {
-        ASSERT_TRUE(
-            nodes[k].start({kExe, "node", "--port", std::to_string(base), "--first",
-                            std::to_string(k * 6), "--count", "6", "--streams", "3", "--hops", "4"},
-                           "/tmp/test_mw_opcua_node" + std::to_string(k) + ".log", err))
-            << err;
-        ASSERT_TRUE(nodes[k].waitForLine("READY", std::chrono::seconds(30), err)) << err;
-    }
-    auto r = runClient({kExe, "client", "--mode", "chain", "--port", std::to_string(base),
-                        "--streams", "3", "--hops", "4", "--runs", "10"},
-                       60, "/tmp/test_mw_opcua_chain.log");
-    ASSERT_EQ(r.exitCode, 0) << r.log << nodes[0].logTail() << nodes[1].logTail();
+    auto r = pnp::testing::runSmallChain(kExe, "opcua", 30, err);
+    ASSERT_TRUE(err.empty()) << err;
+    ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 1u);
     EXPECT_NE(r.lines[0].find("\"n\":10"), std::string::npos) << r.lines[0];
 }

@@ -12,52 +12,15 @@
 #include <fstream>
 #include <sstream>
 
-#include "support/child_process.hpp"
+#include "adapter_test.hpp"
 
 using pnp::testing::ChildProcess;
+using pnp::testing::ClientRun;
+using pnp::testing::runClient;
 
 namespace {
 
 const std::string kExe = PNP_MW_ADAPTER;
-
-struct ClientRun {
-    int exitCode = -1;
-    std::vector<std::string> lines;  // stdout
-    std::string log;                 // stderr
-};
-
-std::string quote(const std::string& s) {
-    std::string q = "'";
-    for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-    return q + "'";
-}
-
-// Runs argv under `timeout -s KILL` (a hung client cannot hang the test).
-ClientRun runClient(const std::vector<std::string>& argv, int seconds, const std::string& log) {
-    std::string cmd = "timeout -s KILL " + std::to_string(seconds);
-    for (const auto& a : argv) cmd += " " + quote(a);
-    cmd += " 2>" + quote(log);
-    ClientRun r;
-    FILE* p = ::popen(cmd.c_str(), "r");
-    if (!p) return r;
-    std::array<char, 4096> buf{};
-    std::string line;
-    while (std::fgets(buf.data(), static_cast<int>(buf.size()), p)) {
-        line += buf.data();
-        if (!line.empty() && line.back() == '\n') {
-            line.pop_back();
-            r.lines.push_back(line);
-            line.clear();
-        }
-    }
-    const int st = ::pclose(p);
-    r.exitCode = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-    std::ifstream in(log);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    r.log = ss.str();
-    return r;
-}
 
 bool portAccepts(unsigned short port) {
     const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);

@@ -34,22 +34,10 @@ void roundTrip(const std::string& mode) {
 TEST(MiddlewareTcp, EchoRoundTripsEveryPayloadIntact) { roundTrip("echo"); }
 TEST(MiddlewareTcp, AckAnswersEveryPayloadWithOneByte) { roundTrip("ack"); }
 
-TEST(MiddlewareTcp, ChainCarriesTenStreamsThroughTheNodes) {
-    const int base = pnp::testing::freeLoopbackPort();
-    ChildProcess nodes[2];
+TEST(MiddlewareTcp, ChainCarriesThreeStreamsThroughTheNodes) {
     std::string err;
-    // 3 streams x 4 hops = 12 nodes in two processes
-    for (int k = 0; k < 2; ++k) {
-        ASSERT_TRUE(
-            nodes[k].start({kExe, "node", "--port", std::to_string(base), "--first",
-                            std::to_string(k * 6), "--count", "6", "--streams", "3", "--hops", "4"},
-                           "/tmp/test_mw_tcp_node" + std::to_string(k) + ".log", err))
-            << err;
-        ASSERT_TRUE(nodes[k].waitForLine("READY", std::chrono::seconds(10), err)) << err;
-    }
-    auto r = runClient({kExe, "client", "--mode", "chain", "--port", std::to_string(base),
-                        "--streams", "3", "--hops", "4", "--runs", "10"},
-                       60, "/tmp/test_mw_tcp_chain.log");
+    auto r = pnp::testing::runSmallChain(kExe, "tcp", 10, err);
+    ASSERT_TRUE(err.empty()) << err;
     ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 1u);
     EXPECT_NE(r.lines[0].find("\"n\":10"), std::string::npos) << r.lines[0];

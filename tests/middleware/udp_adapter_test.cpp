@@ -14,8 +14,8 @@
 
 #include "adapter_test.hpp"
 
-using pnp::test::runClient;
 using pnp::testing::ChildProcess;
+using pnp::testing::runClient;
 
 namespace {
 
@@ -117,21 +117,9 @@ TEST(MiddlewareUdp, LostRequestsAreRetransmittedAndLateAnswersDiscarded) {
 }
 
 TEST(MiddlewareUdp, ChainCarriesThreeStreamsThroughTheNodes) {
-    const int base = pnp::testing::freeLoopbackPort();
-    ChildProcess nodes[2];
     std::string err;
-    // 3 streams x 4 hops = 12 nodes in two processes
-    for (int k = 0; k < 2; ++k) {
-        ASSERT_TRUE(
-            nodes[k].start({kExe, "node", "--port", std::to_string(base), "--first",
-                            std::to_string(k * 6), "--count", "6", "--streams", "3", "--hops", "4"},
-                           "/tmp/test_mw_udp_node" + std::to_string(k) + ".log", err))
-            << err;
-        ASSERT_TRUE(nodes[k].waitForLine("READY", std::chrono::seconds(10), err)) << err;
-    }
-    auto r = runClient({kExe, "client", "--mode", "chain", "--port", std::to_string(base),
-                        "--streams", "3", "--hops", "4", "--runs", "10"},
-                       60, "/tmp/test_mw_udp_chain.log");
+    auto r = pnp::testing::runSmallChain(kExe, "udp", 10, err);
+    ASSERT_TRUE(err.empty()) << err;
     ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 1u);
     EXPECT_NE(r.lines[0].find("\"n\":10"), std::string::npos) << r.lines[0];

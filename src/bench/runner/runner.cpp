@@ -214,6 +214,12 @@ class Runner {
     }
     int nextDomain() { return 1 + (domainBase_ + domainCount_++) % 200; }
     Peer startPeer(const AdapterInfo& a, const Site& site, const std::string& tag);
+    // The adapter's server (`server --mode MODE`) in the site's server namespace, READY or
+    // null with the reason in `error`.
+    std::unique_ptr<Process> startServer(const AdapterInfo& a, const std::string& variant,
+                                         const std::string& mode, const Site& site,
+                                         const Peer& peer, int port, int domain, int cpu,
+                                         const std::string& tag, std::string& error);
     Json runOne(const AdapterInfo& a, const std::string& variant, const std::string& mode,
                 const std::string& load, const Site& site, const Peer& peer);
     Json runChain(const AdapterInfo& a);
@@ -423,6 +429,26 @@ std::string describeSizes(const Json& sizes) {
            (sizes.size() > 1 ? ", " + one(sizes.back()) : std::string());
 }
 
+std::unique_ptr<Process> Runner::startServer(const AdapterInfo& a, const std::string& variant,
+                                             const std::string& mode, const Site& site,
+                                             const Peer& peer, int port, int domain, int cpu,
+                                             const std::string& tag, std::string& error) {
+    Spawn ss;
+    ss.argv = {a.exe, "server", "--mode", mode};
+    auto addr = addressing(a, variant, site.serverAddr, site.serverAddr, port, peer, domain, cpu);
+    ss.argv.insert(ss.argv.end(), addr.begin(), addr.end());
+    ss.log = log(tag + "-server.log");
+    ss.netns = site.serverNs;
+    ss.env = env(a, site.serverAddr, peer);
+    auto server = Process::start(ss);
+    if (!server->waitForLine("READY", 30s, error)) {
+        checkStop();
+        error = "server not ready: " + error;
+        return nullptr;
+    }
+    return server;
+}
+
 Json Runner::runOne(const AdapterInfo& a, const std::string& variant, const std::string& mode,
                     const std::string& load, const Site& site, const Peer& peer) {
     const std::string tag = load + "/" + a.name + "-" + variant + "-" + mode;
@@ -439,19 +465,11 @@ Json Runner::runOne(const AdapterInfo& a, const std::string& variant, const std:
     const int port = usesPort(a) ? freePort() : 0;
     const int domain = nextDomain();
     // The server: resting uses an ACK server.
-    Spawn ss;
-    ss.argv = {a.exe, "server", "--mode", mode == "echo" ? "echo" : "ack"};
-    auto addr =
-        addressing(a, variant, site.serverAddr, site.serverAddr, port, peer, domain, s_.serverCpu);
-    ss.argv.insert(ss.argv.end(), addr.begin(), addr.end());
-    ss.log = log(tag + "-server.log");
-    ss.netns = site.serverNs;
-    ss.env = env(a, site.serverAddr, peer);
-    auto server = Process::start(ss);
     std::string error;
-    if (!server->waitForLine("READY", 30s, error)) {
-        checkStop();
-        run["reason"] = "server not ready: " + error;
+    auto server = startServer(a, variant, mode == "echo" ? "echo" : "ack", site, peer, port, domain,
+                              s_.serverCpu, tag, error);
+    if (!server) {
+        run["reason"] = error;
         return run;
     }
     std::string note;
@@ -507,7 +525,7 @@ Json Runner::runOne(const AdapterInfo& a, const std::string& variant, const std:
     run["note"] = note;
     Spawn cs;
     cs.argv = {a.exe, "client", "--mode", mode};
-    addr =
+    const auto addr =
         addressing(a, variant, site.serverAddr, site.clientAddr, port, peer, domain, s_.clientCpu);
     cs.argv.insert(cs.argv.end(), addr.begin(), addr.end());
     const std::vector<std::string> clientOpts = {"--reps",
@@ -967,18 +985,10 @@ Json Runner::runOverhead(const AdapterInfo& a, const std::string& variant) {
     Peer peer = startPeer(a, site, tag);
     const int port = usesPort(a) ? freePort() : 0;
     const int domain = nextDomain();
-    Spawn ss;
-    ss.argv = {a.exe, "server", "--mode", "ack"};
-    auto ad = addressing(a, variant, site.serverAddr, site.serverAddr, port, peer, domain, -1);
-    ss.argv.insert(ss.argv.end(), ad.begin(), ad.end());
-    ss.log = log(tag + "-server.log");
-    ss.netns = site.serverNs;
-    ss.env = env(a, site.serverAddr, peer);
-    auto server = Process::start(ss);
     std::string error;
-    if (!server->waitForLine("READY", 30s, error)) {
-        checkStop();
-        o["reason"] = "server not ready: " + error;
+    auto server = startServer(a, variant, "ack", site, peer, port, domain, -1, tag, error);
+    if (!server) {
+        o["reason"] = error;
         return o;
     }
     // One capture around one client run. A capture that dropped packets is marked.

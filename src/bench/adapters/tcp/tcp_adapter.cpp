@@ -9,6 +9,7 @@
 #include <netinet/tcp.h>
 #include <poll.h>
 #include <sys/socket.h>
+#include <sys/time.h>
 #include <sys/uio.h>
 #include <unistd.h>
 
@@ -23,6 +24,7 @@
 #include <utility>
 
 #include "bench/driver/driver.hpp"
+#include "bench/driver/net.hpp"
 
 namespace pnp::bench::tcp {
 namespace {
@@ -30,24 +32,13 @@ namespace {
 using driver::Bytes;
 using driver::Clock;
 using driver::Options;
+using driver::failErrno;
+using driver::ipv4Address;
 
 constexpr int kDefaultPort = 7310;
 constexpr std::uint32_t kMaxFrame = 64u << 20;
 
-[[noreturn]] void fail(const std::string& what) {
-    throw std::runtime_error(what + ": " + std::strerror(errno));
-}
-
 int basePort(const Options& o) { return o.port ? o.port : kDefaultPort; }
-
-sockaddr_in address(const std::string& host, int port) {
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_port = htons(static_cast<std::uint16_t>(port));
-    if (inet_pton(AF_INET, host.c_str(), &a.sin_addr) != 1)
-        throw std::runtime_error("not an IPv4 address: " + host);
-    return a;
-}
 
 class Socket {
   public:
@@ -71,20 +62,23 @@ class Socket {
     int fd_;
 };
 
-void noDelay(int fd) {
+// A connected socket: TCP_NODELAY, and reads that return every 100 ms without data.
+void connected(int fd) {
     int one = 1;
     ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    timeval tv{0, 100000};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
 }
 
 Socket listenOn(const std::string& host, int port) {
     Socket s(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-    if (s.fd() < 0) fail("socket");
+    if (s.fd() < 0) failErrno("socket");
     int one = 1;
     ::setsockopt(s.fd(), SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-    sockaddr_in a = address(host, port);
+    sockaddr_in a = ipv4Address(host, port);
     if (::bind(s.fd(), reinterpret_cast<sockaddr*>(&a), sizeof a) != 0)
-        fail("bind " + host + ":" + std::to_string(port));
-    if (::listen(s.fd(), 128) != 0) fail("listen");
+        failErrno("bind " + host + ":" + std::to_string(port));
+    if (::listen(s.fd(), 128) != 0) failErrno("listen");
     return s;
 }
 
@@ -92,13 +86,13 @@ Socket listenOn(const std::string& host, int port) {
 Socket connectTo(const std::string& host, int port, Clock::time_point deadline) {
     for (;;) {
         Socket s(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-        if (s.fd() < 0) fail("socket");
-        sockaddr_in a = address(host, port);
+        if (s.fd() < 0) failErrno("socket");
+        sockaddr_in a = ipv4Address(host, port);
         if (::connect(s.fd(), reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) {
-            noDelay(s.fd());
+            connected(s.fd());
             return s;
         }
-        if (Clock::now() >= deadline) fail("connect " + host + ":" + std::to_string(port));
+        if (Clock::now() >= deadline) failErrno("connect " + host + ":" + std::to_string(port));
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
 }
@@ -110,16 +104,18 @@ bool waitReadable(int fd, const std::stop_token& stop, Clock::time_point deadlin
         pollfd p{fd, POLLIN, 0};
         const int r = ::poll(&p, 1, 100);
         if (r > 0) return true;
-        if (r < 0 && errno != EINTR) fail("poll");
+        if (r < 0 && errno != EINTR) failErrno("poll");
     }
 }
 
-// Reads exactly n bytes; false at end of stream, stop or deadline.
+// Reads exactly n bytes; false at end of stream, stop or deadline. Blocking reads (one
+// syscall per read when data is there: the floor must not pay for a poll per message); the
+// sockets' 100 ms receive timeout (connected()) lets the loop see stop and the deadline.
 bool readAll(int fd, std::byte* out, std::size_t n, const std::stop_token& stop,
              Clock::time_point deadline) {
     std::size_t done = 0;
     while (done < n) {
-        const ssize_t r = ::recv(fd, out + done, n - done, MSG_DONTWAIT);
+        const ssize_t r = ::recv(fd, out + done, n - done, 0);
         if (r > 0) {
             done += static_cast<std::size_t>(r);
             continue;
@@ -127,7 +123,7 @@ bool readAll(int fd, std::byte* out, std::size_t n, const std::stop_token& stop,
         if (r == 0) return false;
         if (errno == EINTR) continue;
         if (errno != EAGAIN && errno != EWOULDBLOCK) return false;
-        if (!waitReadable(fd, stop, deadline)) return false;
+        if (stop.stop_requested() || Clock::now() >= deadline) return false;
     }
     return true;
 }
@@ -146,7 +142,7 @@ void writeFrame(int fd, std::span<const std::byte> bytes) {
         const ssize_t w = ::sendmsg(fd, &m, MSG_NOSIGNAL);
         if (w < 0) {
             if (errno == EINTR) continue;
-            fail("send");
+            failErrno("send");
         }
         auto k = static_cast<std::size_t>(w);
         left -= k;
@@ -181,7 +177,7 @@ void acceptLoop(int listenFd, const std::stop_token& stop,
         Socket c(::accept4(listenFd, nullptr, nullptr, SOCK_CLOEXEC));
         if (c.fd() < 0) continue;
         if (++accepted > 4096) break;  // bounded: a benchmark peer opens a handful
-        noDelay(c.fd());
+        connected(c.fd());
         workers.emplace_back([&serve, s = std::move(c)]() mutable { serve(std::move(s)); });
     }
     // jthreads join here; their loops end on stop (checked every 100 ms).

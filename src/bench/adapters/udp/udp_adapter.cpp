@@ -21,6 +21,7 @@
 #include <utility>
 
 #include "bench/driver/driver.hpp"
+#include "bench/driver/net.hpp"
 
 namespace pnp::bench::udp {
 namespace {
@@ -28,6 +29,8 @@ namespace {
 using driver::Bytes;
 using driver::Clock;
 using driver::Options;
+using driver::failErrno;
+using driver::ipv4Address;
 
 constexpr int kDefaultPort = 7311;
 constexpr std::size_t kHeader = 8;           // the sequence number
@@ -36,21 +39,8 @@ constexpr std::size_t kMaxPayload = kMaxDatagram - kHeader;
 // How often a blocked receive wakes up to look at stop requests and deadlines.
 constexpr std::chrono::milliseconds kPoll{50};
 
-[[noreturn]] void fail(const std::string& what) {
-    throw std::runtime_error(what + ": " + std::strerror(errno));
-}
-
 int basePort(const Options& o) { return o.port ? o.port : kDefaultPort; }
 int sinkPort(const Options& o) { return basePort(o) + 1 + o.nodes(); }
-
-sockaddr_in address(const std::string& host, int port) {
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_port = htons(static_cast<std::uint16_t>(port));
-    if (inet_pton(AF_INET, host.c_str(), &a.sin_addr) != 1)
-        throw std::runtime_error("not an IPv4 address: " + host);
-    return a;
-}
 
 void checkPayload(std::size_t n) {
     if (n > kMaxPayload)
@@ -73,7 +63,7 @@ std::uint64_t getSeq(const std::byte* in) {
 class Socket {
   public:
     Socket() : fd_(::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0)) {
-        if (fd_ < 0) fail("socket");
+        if (fd_ < 0) failErrno("socket");
         // Several 32 KiB datagrams in flight (chain streams) fit without loss.
         int size = 4 << 20;
         ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &size, sizeof size);
@@ -87,9 +77,9 @@ class Socket {
     int fd() const { return fd_; }
 
     void bind(const std::string& host, int port) {
-        sockaddr_in a = address(host, port);
+        sockaddr_in a = ipv4Address(host, port);
         if (::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0)
-            fail("bind " + host + ":" + std::to_string(port));
+            failErrno("bind " + host + ":" + std::to_string(port));
     }
 
   private:
@@ -110,7 +100,7 @@ void sendDatagram(int fd, const sockaddr_in* to, const std::byte* header,
         if (::sendmsg(fd, &m, MSG_NOSIGNAL) >= 0) return;
         // A refused earlier datagram is reported on the next call: not this one's failure.
         if (errno == EINTR || errno == ECONNREFUSED) continue;
-        fail("send");
+        failErrno("send");
     }
 }
 
@@ -122,7 +112,7 @@ ssize_t receive(int fd, std::byte* buf, std::size_t size, sockaddr_in* from = nu
     if (r >= 0) return r;
     if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR || errno == ECONNREFUSED)
         return -1;
-    fail("receive");
+    failErrno("receive");
 }
 
 class UdpClient final : public driver::Client {
@@ -134,11 +124,11 @@ class UdpClient final : public driver::Client {
           peer_(o.host + ":" + std::to_string(basePort(o))),
           spare_(kMaxDatagram) {
         if (retransmit_.count() < 1) throw std::invalid_argument("retransmit-ms must be >= 1");
-        sockaddr_in a = address(o.host, basePort(o));
+        sockaddr_in a = ipv4Address(o.host, basePort(o));
         // Connected: only the server's datagrams arrive, and a port without a server is
         // reported (ECONNREFUSED from the ICMP answer).
         if (::connect(socket_.fd(), reinterpret_cast<sockaddr*>(&a), sizeof a) != 0)
-            fail("connect " + peer_);
+            failErrno("connect " + peer_);
     }
 
     ~UdpClient() override {
@@ -170,7 +160,7 @@ class UdpClient final : public driver::Client {
             if (r < 0 && errno == ECONNREFUSED) refused = true;
             if (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR &&
                 errno != ECONNREFUSED)
-                fail("receive");
+                failErrno("receive");
             if (r >= static_cast<ssize_t>(kHeader) && getSeq(got) == seq) {
                 const auto n = static_cast<std::size_t>(r) - kHeader;
                 if (n > reply.size()) {
@@ -244,8 +234,8 @@ void runChainNodes(driver::ServerContext& ctx) {
     for (int k = 0; k < o.count; ++k) {
         const int i = o.first + k;
         nodes.emplace_back([&, i, fd = sockets[static_cast<std::size_t>(k)]->fd()] {
-            const sockaddr_in next = (i + 1) % o.hops == 0 ? address(sinkHost, sinkPort(o))
-                                                           : address(o.host, basePort(o) + 2 + i);
+            const sockaddr_in next = (i + 1) % o.hops == 0 ? ipv4Address(sinkHost, sinkPort(o))
+                                                           : ipv4Address(o.host, basePort(o) + 2 + i);
             Bytes buf(kMaxDatagram + 1);
             while (!ctx.stop.stop_requested()) {
                 const ssize_t r = receive(fd, buf.data(), buf.size());
@@ -269,7 +259,7 @@ class UdpChainClient final : public driver::ChainClient {
         checkPayload(message.size());
         std::byte header[kHeader];
         putSeq(header, ++seq_);
-        const sockaddr_in to = address(options_.host, basePort(options_) + 1 + node);
+        const sockaddr_in to = ipv4Address(options_.host, basePort(options_) + 1 + node);
         sendDatagram(out_.fd(), &to, header, message);
     }
 
