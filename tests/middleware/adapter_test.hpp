@@ -67,7 +67,8 @@ inline bool startReady(ChildProcess& p, const std::vector<std::string>& argv,
 // `error` when a node process did not get ready.
 inline ClientRun runSmallChain(const std::string& exe, const std::string& name, int readySeconds,
                                std::string& error) {
-    const std::string base = std::to_string(freeLoopbackPort());
+    // Ports base .. base + 13: 12 nodes and the client's sink.
+    const std::string base = std::to_string(freeLoopbackPortRange(14));
     ChildProcess nodes[2];
     for (int k = 0; k < 2; ++k)
         if (!startReady(nodes[k],

@@ -40,6 +40,28 @@ inline unsigned short freeLoopbackPort() {
     return ntohs(a.sin_port);
 }
 
+// The first of `count` consecutive TCP ports on 127.0.0.1 that were all free a moment ago,
+// below the kernel's ephemeral range (32768..), where other tests' client sockets take theirs.
+inline unsigned short freeLoopbackPortRange(int count) {
+    static unsigned seed = static_cast<unsigned>(::getpid()) * 2654435761u;
+    for (int attempt = 0; attempt < 200; ++attempt) {
+        seed = seed * 1103515245u + 12345u;
+        const int base = 20000 + static_cast<int>((seed >> 8) % 12000u);
+        bool free = true;
+        for (int i = 0; i < count && free; ++i) {
+            int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+            sockaddr_in a{};
+            a.sin_family = AF_INET;
+            a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+            a.sin_port = htons(static_cast<unsigned short>(base + i));
+            free = ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+            ::close(fd);
+        }
+        if (free) return static_cast<unsigned short>(base);
+    }
+    return freeLoopbackPort();
+}
+
 // The full path of an executable found in PATH, or "".
 inline std::string findInPath(const std::string& name) {
     const char* path = std::getenv("PATH");

@@ -848,9 +848,9 @@ std::uint64_t AddressSpace::structureGeneration() const {
 }
 
 // ---- application API: values ---------------------------------------------------------------
-StatusCode AddressSpace::setValue(const NodeId& variable, DataValue value) {
-    auto lock = impl_->lockForValueChange();
-    Impl& s = *impl_;
+namespace {
+// setValue's work, the exclusive lock held.
+StatusCode setValueLocked(AddressSpace::Impl& s, const NodeId& variable, DataValue value) {
     NodeIndex i = s.find(variable);
     if (i == kNoNode) return status::BadNodeIdUnknown;
     Node& n = s.nodes[i];
@@ -865,6 +865,22 @@ StatusCode AddressSpace::setValue(const NodeId& variable, DataValue value) {
     storeValue(*n.extra, std::move(value));
     s.valueStored(i);
     return StatusCode{};
+}
+}  // namespace
+
+StatusCode AddressSpace::setValue(const NodeId& variable, DataValue value) {
+    auto lock = impl_->lockForValueChange();
+    return setValueLocked(*impl_, variable, std::move(value));
+}
+
+StatusCode AddressSpace::setValues(std::vector<std::pair<NodeId, DataValue>> values) {
+    auto lock = impl_->lockForValueChange();
+    StatusCode first;
+    for (auto& [variable, value] : values) {
+        StatusCode c = setValueLocked(*impl_, variable, std::move(value));
+        if (c.isBad() && first.isGood()) first = c;
+    }
+    return first;
 }
 
 DataValue AddressSpace::readValue(const NodeId& variable) const {

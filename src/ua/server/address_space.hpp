@@ -335,6 +335,10 @@ class AddressSpace {
     // Sets a Variable's value without access checks but with the type check (returns
     // Bad_TypeMismatch & co. instead of throwing). A source timestamp is added when absent.
     StatusCode setValue(const NodeId& variable, DataValue value);
+    // Several values as one change: a Read (or a Read request's items, which are read under
+    // one lock) sees all of them or none. Each is checked as by setValue; a bad one is
+    // skipped and the first bad status returned.
+    StatusCode setValues(std::vector<std::pair<NodeId, DataValue>> values);
     DataValue readValue(const NodeId& variable) const;
     // Serves the value from callbacks (replaces previous callbacks; empty to remove).
     void setValueCallback(const NodeId& variable, ValueCallbacks callbacks);

@@ -333,9 +333,6 @@ struct FiniteStateMachine::Impl {
     }
 
     // ---- run time (mutex held) ------------------------------------------------------------
-    void set(const NodeId& variable, Variant v) {
-        if (!variable.isNull()) as.setValue(variable, DataValue(std::move(v)));
-    }
 
     // Writes the current state (and, after a transition, the last transition) into the
     // address space.
@@ -352,6 +349,13 @@ struct FiniteStateMachine::Impl {
                 as.setExecutable(m.node, on);
                 m.executable = on;
             }
+        // One change of the address space: a Read never sees the new state with the old
+        // last transition.
+        std::vector<std::pair<NodeId, DataValue>> values;
+        values.reserve(10);
+        auto set = [&](const NodeId& variable, Variant v) {
+            if (!variable.isNull()) values.emplace_back(variable, DataValue(std::move(v)));
+        };
         const State& s = states[current];
         set(currentStateId, Variant(s.node));
         set(currentStateNumber, Variant(s.number));
@@ -373,6 +377,7 @@ struct FiniteStateMachine::Impl {
         }
         set(availableStates, Variant(std::move(toStates)));
         set(availableTransitions, Variant(std::move(possible)));
+        as.setValues(std::move(values));
     }
 
     // The transition named `name` (byCause: caused by method `name`) from the current state.

@@ -626,6 +626,14 @@ class DdsChainClient final : public driver::ChainClient {
 }  // namespace
 }  // namespace pnp::bench::dds
 
+#ifdef PNP_SANITIZED_BUILD
+// Debian's libfastrtps 2.9 deletes a statistics reader through a base of another size
+// (RTPSReader::~RTPSReader, all inside the library): ASan's new-delete-type-mismatch check
+// stops every participant's tear-down there. Off for this executable only; every other
+// check stays.
+extern "C" const char* __asan_default_options() { return "new_delete_type_mismatch=0"; }
+#endif
+
 int main(int argc, char** argv) {
     namespace driver = pnp::bench::driver;
     namespace dds = pnp::bench::dds;
