@@ -21,11 +21,17 @@ constexpr ua::UInt16 kSeverityFailure = 700;
 
 SkillRuntime::SkillRuntime(ua::server::Server& server, std::shared_ptr<Skill> skill,
                            SkillNodes nodes, std::chrono::milliseconds maxInactiveLockTime)
-    : server_(server), skill_(std::move(skill)), nodes_(std::move(nodes)) {
+    : server_(server),
+      skill_(std::move(skill)),
+      nodes_(std::move(nodes)),
+      parameterGroup_(nodes_.parameters),
+      resultGroup_({nodes_.result, nodes_.message}) {
     ua::server::FiniteStateMachine::Options options;
     options.eventType = nodes_.eventType;
     options.eventSeverity = kSeverityNormal;
     fsm_ = std::make_unique<ua::server::FiniteStateMachine>(server_, nodes_.node, options);
+    for (const auto& s : fsm_->states())
+        stateOfIndex_.push_back(programStateFromName(s.browseName.name));
     lock_ = std::make_unique<LockingServices>(server_, nodes_.lock, maxInactiveLockTime);
     std::lock_guard l(mutex_);
     setFinalResult(SkillResult::None, "");
@@ -82,7 +88,8 @@ void SkillRuntime::shutdown() {
 }
 
 ProgramState SkillRuntime::state() const {
-    return programStateFromName(fsm_->currentState().browseName.name);
+    const std::size_t i = fsm_->currentStateIndex();
+    return i < stateOfIndex_.size() ? stateOfIndex_[i] : ProgramState::Unknown;
 }
 
 void SkillRuntime::setFinalResult(SkillResult result, const std::string& message) {
@@ -90,11 +97,12 @@ void SkillRuntime::setFinalResult(SkillResult result, const std::string& message
     const bool clear = result == SkillResult::None && message.empty();
     if (clear && finalResultClear_) return;
     finalResultClear_ = clear;
-    auto& space = server_.addressSpace();
+    std::vector<std::pair<std::size_t, ua::DataValue>> values;
     if (!nodes_.result.isNull())
-        space.setValue(nodes_.result, ua::DataValue(Variant(static_cast<ua::Int32>(result))));
+        values.emplace_back(0, ua::DataValue(Variant(static_cast<ua::Int32>(result))));
     if (!nodes_.message.isNull())
-        space.setValue(nodes_.message, ua::DataValue(Variant(ua::String(message))));
+        values.emplace_back(1, ua::DataValue(Variant(ua::String(message))));
+    server_.addressSpace().setValues(resultGroup_, std::move(values));
 }
 
 SkillRuntime::Fields SkillRuntime::eventFields(const std::string& message,
@@ -111,13 +119,10 @@ void SkillRuntime::start(const MethodCallContext& ctx, MethodCompletion done) {
     std::unique_lock l(mutex_);
     if (busy_ || state() != ProgramState::Ready) return done.fail(status::BadInvalidState);
     // The parameters as they are now: the run never sees a later Write.
-    auto& space = server_.addressSpace();
     std::vector<Variant> values;
     values.reserve(nodes_.parameters.size());
-    for (const NodeId& p : nodes_.parameters) {
-        ua::DataValue dv = space.readValue(p);
+    for (ua::DataValue& dv : server_.addressSpace().readValues(parameterGroup_))
         values.push_back(dv.value ? std::move(*dv.value) : Variant());
-    }
     intermediate_ = Variant();
     setFinalResult(SkillResult::None, "");
     StatusCode st = fsm_->fire("Start", eventFields("", kSeverityNormal));
@@ -128,6 +133,8 @@ void SkillRuntime::start(const MethodCallContext& ctx, MethodCompletion done) {
     stop_ = std::stop_source();
     job_ = Job{std::move(values), generation_, stop_.get_token()};
     l.unlock();
+    // The worker starts now, while the reply and the Running event are still being written:
+    // the skill's work (and a quick one's end) is not delayed by the network.
     wake_.notify_all();
     done(StatusCode{});
 }

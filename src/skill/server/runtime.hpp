@@ -73,6 +73,10 @@ class SkillRuntime : public std::enable_shared_from_this<SkillRuntime> {
     std::shared_ptr<Skill> skill_;
     SkillNodes nodes_;
     std::unique_ptr<ua::server::FiniteStateMachine> fsm_;
+    std::vector<ProgramState> stateOfIndex_;  // by index in fsm_->states()
+    // nodes_.parameters and {nodes_.result, nodes_.message}: read / written under mutex_
+    // without a lookup per node.
+    ua::server::AddressSpace::VariableGroup parameterGroup_, resultGroup_;
     std::unique_ptr<LockingServices> lock_;
 
     mutable std::mutex mutex_;

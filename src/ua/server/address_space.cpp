@@ -850,8 +850,7 @@ std::uint64_t AddressSpace::structureGeneration() const {
 // ---- application API: values ---------------------------------------------------------------
 namespace {
 // setValue's work, the exclusive lock held.
-StatusCode setValueLocked(AddressSpace::Impl& s, const NodeId& variable, DataValue value) {
-    NodeIndex i = s.find(variable);
+StatusCode setValueAt(AddressSpace::Impl& s, NodeIndex i, DataValue value) {
     if (i == kNoNode) return status::BadNodeIdUnknown;
     Node& n = s.nodes[i];
     if ((n.nodeClass != NodeClassBits::Variable && n.nodeClass != NodeClassBits::VariableType) ||
@@ -865,6 +864,9 @@ StatusCode setValueLocked(AddressSpace::Impl& s, const NodeId& variable, DataVal
     storeValue(*n.extra, std::move(value));
     s.valueStored(i);
     return StatusCode{};
+}
+StatusCode setValueLocked(AddressSpace::Impl& s, const NodeId& variable, DataValue value) {
+    return setValueAt(s, s.find(variable), std::move(value));
 }
 }  // namespace
 
@@ -881,6 +883,71 @@ StatusCode AddressSpace::setValues(std::vector<std::pair<NodeId, DataValue>> val
         if (c.isBad() && first.isGood()) first = c;
     }
     return first;
+}
+
+namespace {
+// The group's nodes, looked up again after a structural change (which needs the exclusive
+// lock: with either lock held the generation cannot move).
+void resolve(const AddressSpace::Impl& s, std::uint64_t generation, bool& resolved,
+             std::uint64_t& resolvedIn, std::vector<std::uint32_t>& nodes,
+             const std::vector<NodeId>& ids) {
+    if (resolved && resolvedIn == generation) return;
+    nodes.clear();
+    for (const NodeId& v : ids) nodes.push_back(s.find(v));
+    resolved = true;
+    resolvedIn = generation;
+}
+}  // namespace
+
+StatusCode AddressSpace::setValues(VariableGroup& group,
+                                   std::vector<std::pair<std::size_t, DataValue>> values,
+                                   const std::vector<std::pair<std::size_t, bool>>& executable) {
+    auto lock = impl_->lockForValueChange();
+    Impl& s = *impl_;
+    resolve(s, s.structureGeneration.load(std::memory_order_acquire), group.resolved_,
+            group.generation_, group.nodes_, group.variables_);
+    for (const auto& [k, on] : executable) {
+        if (k >= group.nodes_.size() || group.nodes_[k] == kNoNode) continue;
+        Node& n = s.nodes[group.nodes_[k]];
+        if (n.nodeClass != NodeClassBits::Method) continue;
+        n.set(Node::kExecutable, on);  // as setExecutable()
+        n.set(Node::kUserExecutable, on);
+    }
+    StatusCode first;
+    for (auto& [k, value] : values) {
+        StatusCode c = k < group.nodes_.size() ? setValueAt(s, group.nodes_[k], std::move(value))
+                                               : StatusCode(status::BadNodeIdUnknown);
+        if (c.isBad() && first.isGood()) first = c;
+    }
+    return first;
+}
+
+std::vector<DataValue> AddressSpace::readValues(VariableGroup& group) const {
+    std::vector<DataValue> out;
+    out.reserve(group.variables_.size());
+    std::vector<std::size_t> withCallbacks;
+    {
+        std::shared_lock lock(impl_->mutex);
+        const Impl& s = *impl_;
+        resolve(s, s.structureGeneration.load(std::memory_order_acquire), group.resolved_,
+                group.generation_, group.nodes_, group.variables_);
+        for (std::size_t k = 0; k < group.nodes_.size(); ++k) {
+            const NodeIndex i = group.nodes_[k];
+            const Node* n = i == kNoNode ? nullptr : &s.nodes[i];
+            if (n != nullptr && n->extra && n->extra->value.callbacks) {
+                withCallbacks.push_back(k);  // read below, as readValue (without the lock)
+                out.emplace_back();
+            } else if (n == nullptr || !n->extra ||
+                       (n->nodeClass != NodeClassBits::Variable &&
+                        n->nodeClass != NodeClassBits::VariableType)) {
+                out.push_back(readValue(group.variables_[k]));  // its error, as readValue
+            } else {
+                out.push_back(s.storedValue(*n));
+            }
+        }
+    }
+    for (std::size_t k : withCallbacks) out[k] = readValue(group.variables_[k]);
+    return out;
 }
 
 DataValue AddressSpace::readValue(const NodeId& variable) const {

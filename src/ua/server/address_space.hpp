@@ -339,6 +339,29 @@ class AddressSpace {
     // one lock) sees all of them or none. Each is checked as by setValue; a bad one is
     // skipped and the first bad status returned.
     StatusCode setValues(std::vector<std::pair<NodeId, DataValue>> values);
+    // Variables written together again and again (a state machine's state variables): their
+    // nodes are looked up once per structure generation instead of on every write. Not
+    // thread-safe itself: its owner serialises the writes through it.
+    class VariableGroup {
+      public:
+        explicit VariableGroup(std::vector<NodeId> variables = {})
+            : variables_(std::move(variables)) {}
+        const std::vector<NodeId>& variables() const { return variables_; }
+
+      private:
+        friend class AddressSpace;
+        std::vector<NodeId> variables_;
+        bool resolved_ = false;
+        std::uint64_t generation_ = 0;  // the structure generation nodes_ was resolved in
+        std::vector<std::uint32_t> nodes_;
+    };
+    // The same for members of a group: values[k].first indexes group.variables(). Methods
+    // in the group may be in `executable` (index, flag) too: set in the same change.
+    StatusCode setValues(VariableGroup& group,
+                         std::vector<std::pair<std::size_t, DataValue>> values,
+                         const std::vector<std::pair<std::size_t, bool>>& executable = {});
+    // The values of a group's variables, as readValue() each (read callbacks included).
+    std::vector<DataValue> readValues(VariableGroup& group) const;
     DataValue readValue(const NodeId& variable) const;
     // Serves the value from callbacks (replaces previous callbacks; empty to remove).
     void setValueCallback(const NodeId& variable, ValueCallbacks callbacks);

@@ -86,7 +86,13 @@ struct AddressSpace::Impl {
     double ns0LoadMs = 0;
     ValueListener valueListener;  // see AddressSpace::setValueListener
     void valueStored(NodeIndex i) const {
-        if (valueListener) valueListener(idOf(i), *nodes[i].extra->value.owned);
+        if (!valueListener) return;
+        const Node& n = nodes[i];
+        // The stored id itself for string/GUID/opaque ids (no copy).
+        if (n.idKind == 0)
+            valueListener(NodeId(n.ns, n.idValue), *n.extra->value.owned);
+        else
+            valueListener(otherIds[n.idValue], *n.extra->value.owned);
     }
 
     // ---- lookups (callers hold the lock) ------------------------------------------------------

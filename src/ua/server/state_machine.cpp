@@ -81,6 +81,22 @@ struct FiniteStateMachine::Impl {
     NodeId lastTransition, lastTransitionId, lastTransitionNumber, lastTransitionTime,
         lastTransitionEffective;
     NodeId availableStates, availableTransitions;
+    // The ten above, in that order, then the methods' nodes (kMethods + index in `methods`),
+    // for writing them as one change (bindInstance()).
+    AddressSpace::VariableGroup stateVariables;
+    enum StateVariable : std::size_t {
+        kCurrentState,
+        kCurrentStateId,
+        kCurrentStateNumber,
+        kLastTransition,
+        kLastTransitionId,
+        kLastTransitionNumber,
+        kLastTransitionTime,
+        kLastTransitionEffective,
+        kAvailableStates,
+        kAvailableTransitions,
+        kMethods,
+    };
 
     struct Method {
         QualifiedName name;
@@ -299,7 +315,6 @@ struct FiniteStateMachine::Impl {
         }
         availableStates = child(as, machine, {"AvailableStates"});
         availableTransitions = child(as, machine, {"AvailableTransitions"});
-
         for (std::size_t t = 0; t < transitions.size(); ++t) {
             for (const QualifiedName& cause : transitions[t].causes) {
                 auto m = std::find_if(methods.begin(), methods.end(),
@@ -330,6 +345,12 @@ struct FiniteStateMachine::Impl {
                     if (std::find(tr.causes.begin(), tr.causes.end(), m.name) != tr.causes.end())
                         as.addReference(tr.node, NodeId(0, ns0::HasCause), m.node);
         }
+        std::vector<NodeId> group{
+            currentState,     currentStateId,       currentStateNumber, lastTransition,
+            lastTransitionId, lastTransitionNumber, lastTransitionTime, lastTransitionEffective,
+            availableStates,  availableTransitions};
+        for (const Method& m : methods) group.push_back(m.node);
+        stateVariables = AddressSpace::VariableGroup(std::move(group));
     }
 
     // ---- run time (mutex held) ------------------------------------------------------------
@@ -340,33 +361,36 @@ struct FiniteStateMachine::Impl {
         // Executable first: a client that reads the new CurrentState and calls a method at
         // once must find it executable (the handlers check the machine's own state, which
         // changed before any of this).
+        // One change of the address space: a Read never sees the new state with the old
+        // last transition, nor a method not yet executable in it.
+        std::vector<std::pair<std::size_t, bool>> executable;
         if (options.trackExecutable)
-            for (Method& m : methods) {
+            for (std::size_t k = 0; k < methods.size(); ++k) {
+                Method& m = methods[k];
                 if (m.node.isNull()) continue;
                 const bool on = std::find(m.fromStates.begin(), m.fromStates.end(), current) !=
                                 m.fromStates.end();
                 if (m.executable == static_cast<int>(on)) continue;
-                as.setExecutable(m.node, on);
+                executable.emplace_back(kMethods + k, on);
                 m.executable = on;
             }
-        // One change of the address space: a Read never sees the new state with the old
-        // last transition.
-        std::vector<std::pair<NodeId, DataValue>> values;
+        std::vector<std::pair<std::size_t, DataValue>> values;
         values.reserve(10);
-        auto set = [&](const NodeId& variable, Variant v) {
-            if (!variable.isNull()) values.emplace_back(variable, DataValue(std::move(v)));
+        auto set = [&](std::size_t k, Variant v) {
+            if (!stateVariables.variables()[k].isNull())
+                values.emplace_back(k, DataValue(std::move(v)));
         };
         const State& s = states[current];
-        set(currentStateId, Variant(s.node));
-        set(currentStateNumber, Variant(s.number));
-        set(currentState, Variant(s.displayName));
+        set(kCurrentStateId, Variant(s.node));
+        set(kCurrentStateNumber, Variant(s.number));
+        set(kCurrentState, Variant(s.displayName));
         if (last) {
             const Transition& tr = transitions[*last];
-            set(lastTransitionId, Variant(tr.node));
-            set(lastTransitionNumber, Variant(tr.number));
-            set(lastTransitionTime, Variant(now));
-            set(lastTransitionEffective, Variant(now));
-            set(lastTransition, Variant(tr.displayName));
+            set(kLastTransitionId, Variant(tr.node));
+            set(kLastTransitionNumber, Variant(tr.number));
+            set(kLastTransitionTime, Variant(now));
+            set(kLastTransitionEffective, Variant(now));
+            set(kLastTransition, Variant(tr.displayName));
         }
         std::vector<NodeId> toStates, possible;
         for (const Transition& tr : transitions) {
@@ -375,9 +399,9 @@ struct FiniteStateMachine::Impl {
             if (std::find(toStates.begin(), toStates.end(), states[tr.to].node) == toStates.end())
                 toStates.push_back(states[tr.to].node);
         }
-        set(availableStates, Variant(std::move(toStates)));
-        set(availableTransitions, Variant(std::move(possible)));
-        as.setValues(std::move(values));
+        set(kAvailableStates, Variant(std::move(toStates)));
+        set(kAvailableTransitions, Variant(std::move(possible)));
+        as.setValues(stateVariables, std::move(values), executable);
     }
 
     // The transition named `name` (byCause: caused by method `name`) from the current state.
@@ -529,6 +553,11 @@ const std::vector<FiniteStateMachine::Transition>& FiniteStateMachine::transitio
 FiniteStateMachine::State FiniteStateMachine::currentState() const {
     std::lock_guard lock(impl_->mutex);
     return impl_->states[impl_->current];
+}
+
+std::size_t FiniteStateMachine::currentStateIndex() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->current;
 }
 
 std::optional<FiniteStateMachine::Transition> FiniteStateMachine::lastTransition() const {

@@ -157,6 +157,8 @@ class FiniteStateMachine {
     const std::vector<State>& states() const;
     const std::vector<Transition>& transitions() const;
     State currentState() const;
+    // The index of the current state in states() (no copy).
+    std::size_t currentStateIndex() const;
     std::optional<Transition> lastTransition() const;
     // The method node on the machine instance that has BrowseName `name` (name only), or null.
     NodeId method(std::string_view name) const;

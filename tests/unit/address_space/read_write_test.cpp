@@ -631,5 +631,48 @@ TEST_F(Write, SetValueFromApplicationThread) {
               status::BadTypeMismatch);
 }
 
+TEST_F(Write, VariableGroupWritesAndReadsAsOneChangeAndFollowsStructuralChanges) {
+    NodeId a = addVar("GroupA", ns0::Int32, Variant(Int32{0}));
+    NodeId b = addVar("GroupB", ns0::String, Variant(String("x")));
+    NodeId m =
+        space.addMethod(ns0(ns0::ObjectsFolder), id("GroupM"), name("GroupM"), {}, {},
+                        makeMethodHandler([](const MethodCallContext&, const std::vector<Variant>&,
+                                             std::vector<Variant>&) { return StatusCode{}; }));
+    AddressSpace::VariableGroup group({a, b, id("GroupMissing"), m});
+    EXPECT_TRUE(space
+                    .setValues(group,
+                               {{0, DataValue(Variant(Int32{7}))},
+                                {1, DataValue(Variant(String("seven")))}},
+                               {{3, false}})
+                    .isGood());
+    auto values = space.readValues(group);
+    ASSERT_EQ(values.size(), 4u);
+    EXPECT_EQ(*values[0].value->scalar<Int32>(), 7);
+    EXPECT_EQ(*values[1].value->scalar<String>(), "seven");
+    EXPECT_EQ(values[2].statusOrGood(), status::BadNodeIdUnknown);
+    EXPECT_FALSE(*space.readAttribute(m, AttributeId::Executable).value->scalar<Boolean>());
+    // Checked as setValue: the bad one is skipped, the others written, the first bad returned.
+    EXPECT_EQ(space.setValues(group, {{0, DataValue(Variant(String("no")))},
+                                      {1, DataValue(Variant(String("eight")))},
+                                      {2, DataValue(Variant(Int32{1}))},
+                                      {9, DataValue(Variant(Int32{1}))}}),
+              status::BadTypeMismatch);
+    values = space.readValues(group);
+    EXPECT_EQ(*values[0].value->scalar<Int32>(), 7);
+    EXPECT_EQ(*values[1].value->scalar<String>(), "eight");
+    // A node deleted and another added in its place (a structural change): the group looks
+    // its nodes up again instead of writing through a stale index.
+    space.deleteNode(a);
+    EXPECT_EQ(space.setValues(group, {{0, DataValue(Variant(Int32{8}))}}),
+              status::BadNodeIdUnknown);
+    addVar("GroupA", ns0::Int32, Variant(Int32{0}));
+    EXPECT_TRUE(space.setValues(group, {{0, DataValue(Variant(Int32{9}))}}).isGood());
+    EXPECT_EQ(*space.readValue(a).value->scalar<Int32>(), 9);
+    EXPECT_EQ(*space.readValues(group)[0].value->scalar<Int32>(), 9);
+    // Executable back on through the group.
+    EXPECT_TRUE(space.setValues(group, {}, {{3, true}}).isGood());
+    EXPECT_TRUE(*space.readAttribute(m, AttributeId::Executable).value->scalar<Boolean>());
+}
+
 }  // namespace
 }  // namespace pnp::ua::server::test
