@@ -10,6 +10,7 @@
 // participant's initial peers are the well-known metatraffic ports of the participants it
 // must find, which is why servers and chain nodes have fixed participant ids (server 0, chain
 // client 0, node i: 1 + i).
+#include <arpa/inet.h>
 #include <fastcdr/Cdr.h>
 #include <fastcdr/FastBuffer.h>
 #include <fastcdr/exceptions/Exception.h>
@@ -18,6 +19,12 @@
 #include <fastrtps/attributes/LibrarySettingsAttributes.h>
 #include <fastrtps/utils/IPLocator.h>
 #include <fastrtps/xmlparser/XMLProfileManager.h>
+#include <ifaddrs.h>
+#include <net/if.h>
+#include <netinet/in.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -213,6 +220,43 @@ rtps::Locator_t udpLocator(const std::string& address, std::uint32_t port) {
     return l;
 }
 
+// The MTU of the interface that has IPv4 `address` (0 when unknown).
+unsigned interfaceMtu(const std::string& address) {
+    in_addr want{};
+    if (::inet_pton(AF_INET, address.c_str(), &want) != 1) return 0;
+    ifaddrs* all = nullptr;
+    if (::getifaddrs(&all) != 0) return 0;
+    std::string name;
+    for (const ifaddrs* i = all; i != nullptr; i = i->ifa_next)
+        if (i->ifa_addr != nullptr && i->ifa_addr->sa_family == AF_INET &&
+            reinterpret_cast<const sockaddr_in*>(i->ifa_addr)->sin_addr.s_addr == want.s_addr) {
+            name = i->ifa_name;
+            break;
+        }
+    ::freeifaddrs(all);
+    if (name.empty() || name.size() >= IFNAMSIZ) return 0;
+    const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) return 0;
+    ifreq r{};
+    std::memcpy(r.ifr_name, name.c_str(), name.size() + 1);
+    const int got = ::ioctl(fd, SIOCGIFMTU, &r);
+    ::close(fd);
+    return got == 0 && r.ifr_mtu > 0 ? static_cast<unsigned>(r.ifr_mtu) : 0;
+}
+
+// RTPS messages no larger than the interface's MTU allows without IP fragmentation (a lost
+// IP fragment loses the whole datagram, and its retransmission again: under network load a
+// 32 KiB sample over a 1500-byte link never got through); larger samples are split by RTPS
+// (DATA_FRAG), whose fragments are acknowledged and resent one by one. Loopback (MTU 64 KiB):
+// Fast DDS's default.
+std::uint32_t maxRtpsMessage(const std::string& address) {
+    constexpr std::uint32_t kFastDdsDefault = 65500;
+    constexpr unsigned kIpUdpHeaders = 20 + 8;
+    const unsigned mtu = interfaceMtu(address);
+    if (mtu <= kIpUdpHeaders + 1024) return kFastDdsDefault;
+    return std::min<std::uint32_t>(kFastDdsDefault, mtu - kIpUdpHeaders);
+}
+
 struct Peer {
     std::string address;
     int participantId;
@@ -240,6 +284,7 @@ class Participant {
         transport.use_builtin_transports = false;
         auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
         udp->interfaceWhiteList.push_back(self);
+        udp->maxMessageSize = maxRtpsMessage(self);
         if (c.shm)  // first: preferred for data between participants of one host
             transport.user_transports.push_back(
                 std::make_shared<eprosima::fastdds::rtps::SharedMemTransportDescriptor>());
