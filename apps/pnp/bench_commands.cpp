@@ -140,7 +140,28 @@ std::function<int()> addBenchCommands(CLI::App& app) {
         "stopped and removed).\n"
         "Examples: pnp bench middleware --quick --out /tmp/mw\n"
         "          pnp bench middleware --only tcp,mqtt --loads idle,net --no-chain");
-    return [b, mw]() -> int {
+    // Re-renders report.md and the plots from a results directory's summary.json and CSVs
+    // (e.g. after an interrupted run, or with a newer report layout).
+    auto reportDir = std::make_shared<std::string>();
+    auto reportNoPlots = std::make_shared<bool>(false);
+    CLI::App* rep = bench->add_subcommand(
+        "report",
+        "writes report.md (and plots) again from a `pnp bench middleware` results directory");
+    rep->add_option("dir", *reportDir, "results directory (with summary.json)")->required();
+    rep->add_flag("--no-plots", *reportNoPlots, "report without PNG plots");
+    return [b, mw, rep, reportDir, reportNoPlots]() -> int {
+        if (*rep) {
+            bench::report::Options ro;
+            ro.plots = !*reportNoPlots;
+            try {
+                std::cerr << "report: " << bench::report::writeReport(*reportDir, ro).string()
+                          << "\n";
+                return kExitOk;
+            } catch (const std::exception& e) {
+                std::cerr << "pnp bench report: " << e.what() << "\n";
+                return kExitUaError;
+            }
+        }
         if (!*mw) return -1;
         return runBenchMiddleware(*b);
     };

@@ -15,10 +15,13 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <set>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -864,6 +867,27 @@ TEST(CliDiscovery, UsageErrors) {
     EXPECT_EQ(run({"discover", "--poll", "1"}).exitCode, 2);
     EXPECT_EQ(run({"lds", "--discovery-level", "101"}).exitCode, 2);
     EXPECT_EQ(run({"ua", "serve", "--register-interval", "0"}).exitCode, 2);
+}
+
+// `pnp bench report DIR` renders report.md from a results directory (a copy of the middleware
+// report test's hand-made one) without running anything; a directory without summary.json is
+// an error with a message.
+TEST(CliBench, ReportRendersAResultsDirectoryAgain) {
+    const std::filesystem::path dir =
+        std::filesystem::temp_directory_path() / ("pnp-cli-report-" + std::to_string(::getpid()));
+    std::filesystem::remove_all(dir);
+    std::filesystem::copy(PNP_MW_RESULTS, dir, std::filesystem::copy_options::recursive);
+    Result r = run({"bench", "report", dir.string(), "--no-plots"});
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.err.find("report.md"), std::string::npos) << r.err;
+    std::ifstream in(dir / "report.md");
+    std::stringstream text;
+    text << in.rdbuf();
+    EXPECT_NE(text.str().find("# Middleware evaluation"), std::string::npos);
+    std::filesystem::remove_all(dir);
+    Result missing = run({"bench", "report", (dir / "nothing").string()});
+    EXPECT_NE(missing.exitCode, 0);
+    EXPECT_FALSE(missing.err.empty());
 }
 
 }  // namespace

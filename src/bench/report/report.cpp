@@ -768,8 +768,13 @@ void overheadTable(std::ostream& o, const Data& d) {
     if (rows.empty()) {
         o << "No package overhead measurement in this results directory.\n\n";
     } else {
-        o << "Cells: request / response bytes of one message as TCP/UDP payload.\n\n"
-             "| Middleware | Status |";
+        // The method is the same for every row: said once, the column keeps what differs.
+        std::string common;
+        for (const auto& r : rows)
+            if (common.empty()) common = str(r, "method");
+        o << "Cells: request / response bytes of one message as TCP/UDP payload.";
+        if (!common.empty()) o << " Method: " << common << ".";
+        o << "\n\n| Middleware | Status |";
         for (int p : payloads) o << ' ' << p << " |";
         o << " Connection | Method / reason |\n|---|---|";
         for (std::size_t i = 0; i < payloads.size(); ++i) o << "---:|";
@@ -786,9 +791,11 @@ void overheadTable(std::ostream& o, const Data& d) {
                 o << ' ' << c << " |";
             }
             std::string how = str(r, "method");
+            if (how == common) how.clear();
             const std::string reason = str(r, "reason");
             if (!reason.empty()) how = how.empty() ? reason : how + "; " + reason;
-            o << ' ' << plain(num(r, "connection_bytes"), "%.0f") << " | " << cell(how) << " |\n";
+            o << ' ' << plain(num(r, "connection_bytes"), "%.0f") << " | "
+              << (how.empty() ? std::string("–") : cell(how)) << " |\n";
         }
         o << "\n";
     }
