@@ -222,6 +222,7 @@ class Runner {
                                          const std::string& tag, std::string& error);
     Json runOne(const AdapterInfo& a, const std::string& variant, const std::string& mode,
                 const std::string& load, const Site& site, const Peer& peer);
+    Json chainRecord(const AdapterInfo& a, int hops) const;
     Json runChain(const AdapterInfo& a, int hops);
     Json runChainLargestThatWorks(const AdapterInfo& a);
     Json runOverhead(const AdapterInfo& a, const std::string& variant);
@@ -779,14 +780,29 @@ void Runner::runLoad(const std::string& load) {
 // process; ros forks one process per node itself.
 int nodesPerProcess(const std::string& adapter) { return adapter == "dds" ? 25 : 50; }
 
+// A chain's summary.json record before anything ran (status failed, no reason yet).
+Json Runner::chainRecord(const AdapterInfo& a, int hops) const {
+    const std::string variant = a.variants.front();
+    return {{"adapter", a.name},
+            {"variant", variant},
+            {"status", "failed"},
+            {"reason", ""},
+            {"nodes", 0},
+            {"streams", s_.chainStreams},
+            {"hops", hops},
+            {"runs", s_.chainRuns},
+            {"payload", s_.chainPayload},
+            {"processes", 0},
+            {"note", ""},
+            {"summary", nullptr},
+            {"rss_kib_total", 0},
+            {"csv", "samples/chain/" + a.name + "-" + variant + ".csv"}};
+}
+
 Json Runner::runChain(const AdapterInfo& a, int hops) {
     const std::string variant = a.variants.front();
-    const std::string csvRel = "samples/chain/" + a.name + "-" + variant + ".csv";
-    Json c = {{"adapter", a.name},  {"variant", variant},   {"status", "failed"},
-              {"reason", ""},       {"nodes", 0},           {"streams", s_.chainStreams},
-              {"hops", hops},       {"runs", s_.chainRuns}, {"payload", s_.chainPayload},
-              {"processes", 0},     {"note", ""},           {"summary", nullptr},
-              {"rss_kib_total", 0}, {"csv", csvRel}};
+    Json c = chainRecord(a, hops);
+    const std::string csvRel = c["csv"];
     if (!a.chain) {
         c["status"] = "skipped";
         c["reason"] = "pnp-mw-" + a.name + " has no chain test (info: chain false)";
@@ -962,16 +978,8 @@ Json Runner::runChainLargestThatWorks(const AdapterInfo& a) {
         } catch (const Interrupted&) {
             throw;
         } catch (const std::exception& e) {
-            c = {{"adapter", a.name},
-                 {"variant", a.variants.front()},
-                 {"status", "failed"},
-                 {"reason", e.what()},
-                 {"nodes", 0},
-                 {"streams", s_.chainStreams},
-                 {"hops", hops},
-                 {"runs", s_.chainRuns},
-                 {"payload", s_.chainPayload},
-                 {"summary", nullptr}};
+            c = chainRecord(a, hops);
+            c["reason"] = e.what();
             say("chain " + a.name + ": FAILED " + e.what());
         }
         const bool ok = c.value("status", "") == "ok";

@@ -865,47 +865,30 @@ StatusCode setValueAt(AddressSpace::Impl& s, NodeIndex i, DataValue value) {
     s.valueStored(i);
     return StatusCode{};
 }
-StatusCode setValueLocked(AddressSpace::Impl& s, const NodeId& variable, DataValue value) {
-    return setValueAt(s, s.find(variable), std::move(value));
-}
 }  // namespace
 
 StatusCode AddressSpace::setValue(const NodeId& variable, DataValue value) {
     auto lock = impl_->lockForValueChange();
-    return setValueLocked(*impl_, variable, std::move(value));
+    return setValueAt(*impl_, impl_->find(variable), std::move(value));
 }
 
-StatusCode AddressSpace::setValues(std::vector<std::pair<NodeId, DataValue>> values) {
-    auto lock = impl_->lockForValueChange();
-    StatusCode first;
-    for (auto& [variable, value] : values) {
-        StatusCode c = setValueLocked(*impl_, variable, std::move(value));
-        if (c.isBad() && first.isGood()) first = c;
-    }
-    return first;
+// Structural changes take the exclusive lock: with either lock held the generation cannot
+// move, so the indices stay valid while the caller holds it.
+void AddressSpace::resolve(const Impl& s, VariableGroup& group) {
+    const std::uint64_t generation = s.structureGeneration.load(std::memory_order_acquire);
+    if (group.resolved_ && group.generation_ == generation) return;
+    group.nodes_.clear();
+    for (const NodeId& v : group.variables_) group.nodes_.push_back(s.find(v));
+    group.resolved_ = true;
+    group.generation_ = generation;
 }
-
-namespace {
-// The group's nodes, looked up again after a structural change (which needs the exclusive
-// lock: with either lock held the generation cannot move).
-void resolve(const AddressSpace::Impl& s, std::uint64_t generation, bool& resolved,
-             std::uint64_t& resolvedIn, std::vector<std::uint32_t>& nodes,
-             const std::vector<NodeId>& ids) {
-    if (resolved && resolvedIn == generation) return;
-    nodes.clear();
-    for (const NodeId& v : ids) nodes.push_back(s.find(v));
-    resolved = true;
-    resolvedIn = generation;
-}
-}  // namespace
 
 StatusCode AddressSpace::setValues(VariableGroup& group,
                                    std::vector<std::pair<std::size_t, DataValue>> values,
                                    const std::vector<std::pair<std::size_t, bool>>& executable) {
     auto lock = impl_->lockForValueChange();
     Impl& s = *impl_;
-    resolve(s, s.structureGeneration.load(std::memory_order_acquire), group.resolved_,
-            group.generation_, group.nodes_, group.variables_);
+    resolve(s, group);
     for (const auto& [k, on] : executable) {
         if (k >= group.nodes_.size() || group.nodes_[k] == kNoNode) continue;
         Node& n = s.nodes[group.nodes_[k]];
@@ -925,28 +908,28 @@ StatusCode AddressSpace::setValues(VariableGroup& group,
 std::vector<DataValue> AddressSpace::readValues(VariableGroup& group) const {
     std::vector<DataValue> out;
     out.reserve(group.variables_.size());
-    std::vector<std::size_t> withCallbacks;
+    // Read below by readValue(), without this lock: values served by callbacks, and the
+    // nodes that are missing or no variables (for readValue's status).
+    std::vector<std::size_t> byReadValue;
     {
         std::shared_lock lock(impl_->mutex);
         const Impl& s = *impl_;
-        resolve(s, s.structureGeneration.load(std::memory_order_acquire), group.resolved_,
-                group.generation_, group.nodes_, group.variables_);
+        resolve(s, group);
         for (std::size_t k = 0; k < group.nodes_.size(); ++k) {
             const NodeIndex i = group.nodes_[k];
             const Node* n = i == kNoNode ? nullptr : &s.nodes[i];
-            if (n != nullptr && n->extra && n->extra->value.callbacks) {
-                withCallbacks.push_back(k);  // read below, as readValue (without the lock)
-                out.emplace_back();
-            } else if (n == nullptr || !n->extra ||
-                       (n->nodeClass != NodeClassBits::Variable &&
-                        n->nodeClass != NodeClassBits::VariableType)) {
-                out.push_back(readValue(group.variables_[k]));  // its error, as readValue
-            } else {
+            const bool stored = n != nullptr && n->extra && !n->extra->value.callbacks &&
+                                (n->nodeClass == NodeClassBits::Variable ||
+                                 n->nodeClass == NodeClassBits::VariableType);
+            if (stored) {
                 out.push_back(s.storedValue(*n));
+            } else {
+                byReadValue.push_back(k);
+                out.emplace_back();
             }
         }
     }
-    for (std::size_t k : withCallbacks) out[k] = readValue(group.variables_[k]);
+    for (std::size_t k : byReadValue) out[k] = readValue(group.variables_[k]);
     return out;
 }
 

@@ -335,10 +335,6 @@ class AddressSpace {
     // Sets a Variable's value without access checks but with the type check (returns
     // Bad_TypeMismatch & co. instead of throwing). A source timestamp is added when absent.
     StatusCode setValue(const NodeId& variable, DataValue value);
-    // Several values as one change: a Read (or a Read request's items, which are read under
-    // one lock) sees all of them or none. Each is checked as by setValue; a bad one is
-    // skipped and the first bad status returned.
-    StatusCode setValues(std::vector<std::pair<NodeId, DataValue>> values);
     // Variables written together again and again (a state machine's state variables): their
     // nodes are looked up once per structure generation instead of on every write. Not
     // thread-safe itself: its owner serialises the writes through it.
@@ -355,8 +351,11 @@ class AddressSpace {
         std::uint64_t generation_ = 0;  // the structure generation nodes_ was resolved in
         std::vector<std::uint32_t> nodes_;
     };
-    // The same for members of a group: values[k].first indexes group.variables(). Methods
-    // in the group may be in `executable` (index, flag) too: set in the same change.
+    // Several values of a group as one change: a Read (or a Read request's items, which are
+    // read under one lock) sees all of them or none. values[k].first indexes
+    // group.variables(); each value is checked as by setValue, a bad one is skipped and the
+    // first bad status returned. Methods in the group may be in `executable` (index, flag):
+    // set in the same change, as setExecutable().
     StatusCode setValues(VariableGroup& group,
                          std::vector<std::pair<std::size_t, DataValue>> values,
                          const std::vector<std::pair<std::size_t, bool>>& executable = {});
@@ -426,6 +425,8 @@ class AddressSpace {
     friend struct NodeSetXmlAccess;  // the NodeSet2 XML loader (nodeset_xml.cpp)
     // Serves Server.NamespaceArray from namespaceArray() once namespace 0 is loaded.
     void serveNamespaceArray();
+    // The group's nodes, looked up again after a structural change (either lock held).
+    static void resolve(const Impl& s, VariableGroup& group);
     std::unique_ptr<Impl> impl_;
 };
 

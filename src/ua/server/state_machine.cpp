@@ -315,6 +315,7 @@ struct FiniteStateMachine::Impl {
         }
         availableStates = child(as, machine, {"AvailableStates"});
         availableTransitions = child(as, machine, {"AvailableTransitions"});
+
         for (std::size_t t = 0; t < transitions.size(); ++t) {
             for (const QualifiedName& cause : transitions[t].causes) {
                 auto m = std::find_if(methods.begin(), methods.end(),
@@ -358,11 +359,10 @@ struct FiniteStateMachine::Impl {
     // Writes the current state (and, after a transition, the last transition) into the
     // address space.
     void publish(const DateTime& now) {
-        // Executable first: a client that reads the new CurrentState and calls a method at
-        // once must find it executable (the handlers check the machine's own state, which
-        // changed before any of this).
         // One change of the address space: a Read never sees the new state with the old
-        // last transition, nor a method not yet executable in it.
+        // last transition, and a client that reads the new CurrentState and calls a method
+        // at once finds it executable (the handlers check the machine's own state, which
+        // changed before any of this).
         std::vector<std::pair<std::size_t, bool>> executable;
         if (options.trackExecutable)
             for (std::size_t k = 0; k < methods.size(); ++k) {
