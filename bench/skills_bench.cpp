@@ -1,8 +1,10 @@
 // Skills on loopback (server and client in this process, real sockets between them):
 //   (a) Start call -> the Running transition event at the client (the event item on the skill
 //       node, a Publish request waiting in the server), next to
-//   (b) the raw TCP round trip of a 64-byte frame to an in-process blocking echo thread,
-//       measured interleaved with (a) so that both see the same machine;
+//   (b) the raw TCP round trip of a 64-byte frame to a blocking echo server set up like the
+//       skill server (a process of its own, pnp_bench_echo_server, when the skill server is
+//       one; a thread of this process when it runs here), measured interleaved with (a) so
+//       that both see the same machine;
 //   (c) a no-op skill's full SkillClient::run(): InitLock, Write, Start, both events, Read of
 //       FinalResultData, ExitLock.
 // Prints medians and p99 and the ratio (a)/(b). Targets (issue 5): (a) <= 2 x (b); (c) <= 1 ms.
@@ -23,6 +25,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "bench_util.hpp"
 #include "skill/client/skill_client.hpp"
@@ -90,19 +93,22 @@ double rawRoundTripUs(int fd) {
 
 }  // namespace
 
-// `pnp demo-skills` as a process of its own (as a real skill server runs); killed at exit.
+// A server as a process of its own (as a real skill server runs), started with `argv`; its
+// first line of output says "listening on ADDRESS". Killed at exit.
 struct ServerProcess {
     pid_t pid = -1;
-    std::string url;
-    explicit ServerProcess(const std::string& exe) {
+    std::string url;  // ADDRESS
+    explicit ServerProcess(const std::vector<std::string>& argv) {
         int fds[2];
         if (::pipe(fds) != 0) bench::fail("pipe");
+        std::vector<char*> args;
+        for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+        args.push_back(nullptr);
         pid = ::fork();
         if (pid == 0) {
             ::dup2(fds[1], 1);
             ::close(fds[0]);
-            ::execl(exe.c_str(), exe.c_str(), "demo-skills", "--port", "0", "--host", "127.0.0.1",
-                    "--no-register", static_cast<char*>(nullptr));
+            ::execv(args[0], args.data());
             ::_exit(127);
         }
         ::close(fds[1]);
@@ -111,7 +117,7 @@ struct ServerProcess {
         while (line.size() < 4096 && ::read(fds[0], &c, 1) == 1 && c != '\n') line += c;
         ::close(fds[0]);
         const std::string prefix = "listening on ";
-        if (line.rfind(prefix, 0) != 0) bench::fail("pnp demo-skills did not start: " + line);
+        if (line.rfind(prefix, 0) != 0) bench::fail(argv[0] + " did not start: " + line);
         url = line.substr(prefix.size());
     }
     ~ServerProcess() {
@@ -148,12 +154,31 @@ int main(int argc, char** argv) {
         serverUrl = server.endpointUrl();
         std::printf("skill server: in this process\n");
     } else {
-        process = std::make_unique<ServerProcess>(serverExe);
+        process = std::make_unique<ServerProcess>(std::vector<std::string>{
+            serverExe, "demo-skills", "--port", "0", "--host", "127.0.0.1", "--no-register"});
         serverUrl = process->url;
         std::printf("skill server: %s demo-skills (a process of its own)\n", serverExe.c_str());
     }
-    EchoThread echo;
-    int fd = bench::connectLoopback(echo.port());
+    // The raw baseline's peer is set up like the skill server: a process of its own, or a
+    // thread of this one.
+    std::optional<EchoThread> echoThread;
+    std::unique_ptr<ServerProcess> echoProcess;
+    std::uint16_t echoPort = 0;
+    std::string echoExe;
+#ifdef PNP_BENCH_ECHO_EXE
+    echoExe = PNP_BENCH_ECHO_EXE;
+#endif
+    if (process && !echoExe.empty()) {
+        echoProcess = std::make_unique<ServerProcess>(std::vector<std::string>{echoExe});
+        const auto colon = echoProcess->url.rfind(':');
+        echoPort = static_cast<std::uint16_t>(std::atoi(echoProcess->url.c_str() + colon + 1));
+        std::printf("raw TCP echo: %s (a process of its own)\n", echoExe.c_str());
+    } else {
+        echoThread.emplace();
+        echoPort = echoThread->port();
+        std::printf("raw TCP echo: a thread of this process\n");
+    }
+    int fd = bench::connectLoopback(echoPort);
     if (fd < 0) bench::fail("connect echo");
 
     auto c = std::make_shared<ua::client::Client>();

@@ -23,20 +23,29 @@ struct SkillClient::Queue {
     std::deque<Transition> items;
     std::uint64_t first = 0;  // sequence number of items.front()
     std::uint64_t taken = 0;  // cursor of takeTransitions() / nextTransition()
-    std::map<std::size_t, TransitionCallback> callbacks;
+    // Replaced, never changed in place: an event takes the current set without copying it.
+    using Callbacks = std::map<std::size_t, TransitionCallback>;
+    std::shared_ptr<const Callbacks> callbacks = std::make_shared<const Callbacks>();
     std::size_t nextCallback = 1;
 
     std::uint64_t end() const { return first + items.size(); }
     void push(Transition t) {
-        std::vector<TransitionCallback> cbs;
+        std::shared_ptr<const Callbacks> cbs;
         {
             std::lock_guard lock(mutex);
             items.push_back(t);
             while (items.size() > kKeep) items.pop_front(), ++first;
-            for (auto& [id, cb] : callbacks) cbs.push_back(cb);
+            cbs = callbacks;
         }
         changed.notify_all();
-        for (auto& cb : cbs) cb(t);  // outside the lock: a callback may call the client
+        // Outside the lock: a callback may call the client.
+        for (const auto& [id, cb] : *cbs) cb(t);
+    }
+    // With mutex held.
+    void changeCallbacks(const std::function<void(Callbacks&)>& change) {
+        auto next = std::make_shared<Callbacks>(*callbacks);
+        change(*next);
+        callbacks = std::move(next);
     }
 };
 
@@ -522,13 +531,13 @@ std::size_t SkillClient::onTransition(TransitionCallback callback, Deadline dead
     subscribeTransitions(deadline);
     std::lock_guard lock(queue_->mutex);
     std::size_t id = queue_->nextCallback++;
-    queue_->callbacks.emplace(id, std::move(callback));
+    queue_->changeCallbacks([&](Queue::Callbacks& c) { c.emplace(id, std::move(callback)); });
     return id;
 }
 
 void SkillClient::removeTransitionCallback(std::size_t id) {
     std::lock_guard lock(queue_->mutex);
-    queue_->callbacks.erase(id);
+    queue_->changeCallbacks([&](Queue::Callbacks& c) { c.erase(id); });
 }
 
 std::vector<Transition> SkillClient::takeTransitions() {

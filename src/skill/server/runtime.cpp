@@ -133,10 +133,12 @@ void SkillRuntime::start(const MethodCallContext& ctx, MethodCompletion done) {
     stop_ = std::stop_source();
     job_ = Job{std::move(values), generation_, stop_.get_token()};
     l.unlock();
-    // The worker starts now, while the reply and the Running event are still being written:
-    // the skill's work (and a quick one's end) is not delayed by the network.
-    wake_.notify_all();
     done(StatusCode{});
+    // The worker starts once the reply and the Running event are written: waking it first
+    // puts a system call and a thread that competes for the CPU before them.
+    server_.afterResponsesWritten([w = weak_from_this()] {
+        if (auto self = w.lock()) self->wake_.notify_all();
+    });
 }
 
 void SkillRuntime::halt(const MethodCallContext& ctx, MethodCompletion done) {

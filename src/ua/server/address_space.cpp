@@ -532,14 +532,19 @@ std::uint16_t refTypeFor(const AddressSpace::Impl& s, const NodeId& refType, Nod
     return needRefType(s, refType);
 }
 
+}  // namespace
+
 void storeValue(NodeExtra& x, DataValue v) {
     DateTime now = DateTime::now();
     if (!v.sourceTimestamp) v.sourceTimestamp = now;
     v.serverTimestamp = now;
-    x.value.owned = std::make_unique<DataValue>(std::move(v));
+    // In place: a value written again and again (a state machine's, a sensor's) costs no
+    // allocation of its own. Readers copy it under the lock.
+    if (x.value.owned)
+        *x.value.owned = std::move(v);
+    else
+        x.value.owned = std::make_unique<DataValue>(std::move(v));
 }
-
-}  // namespace
 
 NodeId AddressSpace::addObject(const NodeId& parent, const NodeId& id,
                                const QualifiedName& browseName, const ObjectAttributes& attributes,

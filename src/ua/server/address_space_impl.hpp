@@ -251,4 +251,8 @@ struct AddressSpace::Impl {
 // Number of ns0 nodes compiled in (from the generated blob).
 std::size_t namespaceZeroBlobNodeCount();
 
+// Stores a Variable's value (the lock held exclusively): the server timestamp now, the
+// source timestamp too unless given.
+void storeValue(NodeExtra& x, DataValue v);
+
 }  // namespace pnp::ua::server

@@ -711,10 +711,7 @@ StatusCode AddressSpace::Impl::writeAttribute(std::unique_lock<std::shared_mutex
         i = find(id);
         if (i == kNoNode || !nodes[i].extra) return status::BadNodeIdUnknown;
     }
-    DateTime now = DateTime::now();
-    if (!next.sourceTimestamp) next.sourceTimestamp = now;
-    next.serverTimestamp = now;
-    nodes[i].extra->value.owned = std::make_unique<DataValue>(std::move(next));
+    storeValue(*nodes[i].extra, std::move(next));
     valueStored(i);
     ++changeGeneration;  // the lock may have been released for a write callback
     return kGood;

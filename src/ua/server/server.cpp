@@ -129,6 +129,10 @@ void Server::post(std::function<void()> fn) {
         transport_->post(std::move(fn));
 }
 
+void Server::afterResponsesWritten(std::function<void()> fn) {
+    transport_->afterResponsesWritten(std::move(fn));
+}
+
 // ---- Server object (Part 5 §6.3.1): live status and capabilities ------------------------
 void Server::setUpServerObject() {
     auto& as = *addressSpace_;

@@ -90,6 +90,10 @@ class Server : public transport::ServiceHandler {
     // Runs fn on the network thread, i.e. under the network lock (immediately if called
     // under it).
     void post(std::function<void()> fn);
+    // In a service or method handler (the network thread): runs fn on this thread once it has
+    // left the network lock and written the responses queued so far, e.g. to wake a worker
+    // that would otherwise compete with the response for the CPU. Elsewhere: at once.
+    void afterResponsesWritten(std::function<void()> fn);
 
     // Fires an event (any thread): monitored items on its SourceNode and on every notifier
     // above it up to the Server object receive it (see SubscriptionEngine::fireEvent).

@@ -117,7 +117,8 @@ struct FiniteStateMachine::Impl {
     struct EventTemplate {
         NodeId eventType;
         LocalizedText message;
-        Fields fields;  // Transition, FromState, ToState with their Id and Number
+        // Transition, FromState, ToState with their Id and Number: shared by the events.
+        std::shared_ptr<const Fields> fields;
     };
     std::vector<std::optional<EventTemplate>> eventTemplates;
 
@@ -134,15 +135,17 @@ struct FiniteStateMachine::Impl {
                                                   : NodeId(0, ns0::TransitionEventType);
         e.message = LocalizedText("", machineName + ": " + fs.displayName.text + " -> " +
                                           ts.displayName.text + " (" + tr.displayName.text + ")");
-        e.fields.reserve(9);
+        Fields fields;
+        fields.reserve(9);
         auto add = [&](const char* var, const LocalizedText& text, const NodeId& id, UInt32 n) {
-            e.fields.push_back({{ns0Name(var)}, Variant(text)});
-            e.fields.push_back({{ns0Name(var), ns0Name("Id")}, Variant(id)});
-            e.fields.push_back({{ns0Name(var), ns0Name("Number")}, Variant(n)});
+            fields.push_back({{ns0Name(var)}, Variant(text)});
+            fields.push_back({{ns0Name(var), ns0Name("Id")}, Variant(id)});
+            fields.push_back({{ns0Name(var), ns0Name("Number")}, Variant(n)});
         };
         add("Transition", tr.displayName, tr.node, tr.number);
         add("FromState", fs.displayName, fs.node, fs.number);
         add("ToState", ts.displayName, ts.node, ts.number);
+        e.fields = std::make_shared<const Fields>(std::move(fields));
         slot = std::move(e);
         return *slot;
     }
@@ -441,8 +444,8 @@ struct FiniteStateMachine::Impl {
         e.sourceName = machineName;
         e.severity = options.eventSeverity;
         e.message = tmpl.message;
-        e.fields.reserve(tmpl.fields.size() + extra.size());
-        e.fields = tmpl.fields;
+        e.sharedFields = tmpl.fields;
+        e.fields.reserve(extra.size());
         for (auto& f : extra) {
             // Message and Severity given by the caller replace the defaults.
             if (f.first.size() == 1 && f.first[0].namespaceIndex == 0) {
@@ -461,11 +464,15 @@ struct FiniteStateMachine::Impl {
         }
         server.fireEvent(std::move(e));
 
+        if (!observer) {
+            lock.unlock();
+            return status::Good;
+        }
         TransitionObserver tell = observer;
         State a = fs, b = ts;
         Transition via = tr;
         lock.unlock();
-        if (tell) tell(a, via, b);
+        tell(a, via, b);
         return status::Good;
     }
 

@@ -159,15 +159,20 @@ Variant fieldValue(const EventRecord& r, const FieldRef& f) {
         if (n == "Message") return Variant(e.message);
         if (n == "Severity") return Variant(e.severity);
     }
-    for (const auto& [path, value] : e.fields)
-        if (path == f.path) return value;
+    static const Event::Fields kNone;
+    const Event::Fields& shared = e.sharedFields ? *e.sharedFields : kNone;
+    for (const Event::Fields* fields : {&e.fields, &shared})
+        for (const auto& [path, value] : *fields)
+            if (path == f.path) return value;
     // Clients often name custom fields without their namespace: match the names alone.
-    for (const auto& [path, value] : e.fields) {
-        if (path.size() != f.path.size()) continue;
-        bool same = true;
-        for (std::size_t i = 0; i < path.size() && same; ++i) same = path[i].name == f.path[i].name;
-        if (same) return value;
-    }
+    for (const Event::Fields* fields : {&e.fields, &shared})
+        for (const auto& [path, value] : *fields) {
+            if (path.size() != f.path.size()) continue;
+            bool same = true;
+            for (std::size_t i = 0; i < path.size() && same; ++i)
+                same = path[i].name == f.path[i].name;
+            if (same) return value;
+        }
     return {};
 }
 

@@ -66,8 +66,13 @@ struct Event {
     LocalizedText message;
     UInt16 severity = 500;
     ByteString eventId;
+    using Fields = std::vector<std::pair<std::vector<QualifiedName>, Variant>>;
     // Further fields (of the event type or its subtypes) by browse path from the event.
-    std::vector<std::pair<std::vector<QualifiedName>, Variant>> fields;
+    Fields fields;
+    // More of them, shared by many events of one kind (e.g. a state machine's transition:
+    // Transition, FromState, ToState) rather than copied into each. `fields` win when both
+    // have a path.
+    std::shared_ptr<const Fields> sharedFields;
 
     Event& set(const QualifiedName& name, Variant value) {
         fields.push_back({{name}, std::move(value)});

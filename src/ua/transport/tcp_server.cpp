@@ -127,7 +127,16 @@ struct TcpServer::Impl {
 
 namespace {
 thread_local const void* t_networkLockHolder = nullptr;  // the TcpServer::Impl
+// afterResponsesWritten(): run by this thread when it releases the network lock.
+thread_local std::vector<std::function<void()>> t_afterWrite;
+
+void runDropping(const std::function<void()>& fn) noexcept {
+    try {
+        fn();
+    } catch (...) {
+    }
 }
+}  // namespace
 
 bool TcpServer::Impl::holdsNetworkLock() const { return t_networkLockHolder == this; }
 
@@ -557,6 +566,9 @@ void NetworkLock::unlock() {
     lock_.unlock();
     for (auto& c : t_dirty) c->afterNetworkLock();
     t_dirty.clear();
+    // By index: a function may queue another one (without the lock now: that one runs at once).
+    for (std::size_t i = 0; i < t_afterWrite.size(); ++i) runDropping(t_afterWrite[i]);
+    t_afterWrite.clear();
 }
 
 // =======================================================================================
@@ -780,6 +792,13 @@ void TcpServer::post(std::function<void()> fn) {
 }
 
 bool TcpServer::isNetworkThread() const { return impl_->holdsNetworkLock(); }
+
+void TcpServer::afterResponsesWritten(std::function<void()> fn) {
+    if (impl_->holdsNetworkLock())
+        t_afterWrite.push_back(std::move(fn));
+    else
+        runDropping(fn);
+}
 
 void TcpServer::setTick(std::chrono::milliseconds period, std::function<void()> fn) {
     auto* i = impl_.get();

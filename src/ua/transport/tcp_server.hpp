@@ -130,6 +130,10 @@ class TcpServer {
     void post(std::function<void()> fn);
     // True while this thread holds the network lock (inside every callback).
     bool isNetworkThread() const;
+    // On the network thread: runs fn on this thread once it has released the network lock
+    // and written the responses queued meanwhile. Elsewhere: runs fn at once. Exceptions
+    // escaping fn are dropped.
+    void afterResponsesWritten(std::function<void()> fn);
     // Runs fn under the network lock every `period` (replaces an earlier tick). Callable
     // before start() or from any thread afterwards. A period of 0 removes the tick.
     void setTick(std::chrono::milliseconds period, std::function<void()> fn);

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <condition_variable>
 #include <mutex>
 #include <thread>
 
@@ -206,6 +207,49 @@ TEST(Server, SlowMethodDoesNotBlockOtherClients) {
     EXPECT_GE(total, 500ms);
     server.post([&] {});  // workers were created on the network thread; join them here
     for (auto& w : workers) w.join();
+}
+
+// afterResponsesWritten(): in a handler, fn runs later on the handler's own thread (after the
+// handler returned and its response was written); elsewhere at once.
+TEST(Server, AfterResponsesWrittenRunsOnTheHandlersThreadAfterTheResponse) {
+    server::Server server(testConfig());
+    auto& as = server.addressSpace();
+    UInt16 ns = server.addNamespace("urn:pnp:test:nodes");
+    std::mutex m;
+    std::condition_variable cv;
+    std::thread::id handlerThread, fnThread;
+    bool handlerReturned = false, ranInline = false, ranAfterReturn = false, ran = false;
+    as.addMethod(
+        NodeId(0, ns0::ObjectsFolder), NodeId(ns, "Then"), QualifiedName{ns, "Then"}, {}, {},
+        [&](const server::MethodCallContext&, std::vector<Variant>, server::MethodCompletion done) {
+            std::lock_guard l(m);
+            handlerThread = std::this_thread::get_id();
+            server.afterResponsesWritten([&] {
+                std::lock_guard l2(m);
+                fnThread = std::this_thread::get_id();
+                ranAfterReturn = handlerReturned;
+                ran = true;
+                cv.notify_all();
+            });
+            ranInline = ran;
+            done.succeed({});
+            handlerReturned = true;
+        });
+    server.start();
+    Client c;
+    c.connect(url(server));
+    auto r = c.call(NodeId(0, ns0::ObjectsFolder), NodeId(ns, "Then"), {});
+    EXPECT_TRUE(r.ok()) << r.status.toString();
+    std::unique_lock l(m);
+    ASSERT_TRUE(cv.wait_for(l, 5s, [&] { return ran; }));
+    EXPECT_FALSE(ranInline);
+    EXPECT_TRUE(ranAfterReturn);
+    EXPECT_EQ(fnThread, handlerThread);
+    l.unlock();
+
+    bool atOnce = false;
+    server.afterResponsesWritten([&] { atOnce = true; });  // not the network thread
+    EXPECT_TRUE(atOnce);
 }
 
 // Large ByteStrings travel as splices (referenced, not copied) in requests and responses: a

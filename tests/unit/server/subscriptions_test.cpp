@@ -565,6 +565,43 @@ TEST(Events, SelectClausesAndPropagationToTheServerObject) {
     EXPECT_EQ(fields[8], Variant(String("Gripper")));
 }
 
+// Fields shared by many events (a state machine's transition) are selected like the event's
+// own; where both name a path, the event's own value wins.
+TEST(Events, SharedFieldsAreSelectedAndTheEventsOwnWin) {
+    EventFixture f;
+    UInt32 sub = f.subscribe(10);
+    EventFilter ef;
+    ef.selectClauses = {field({{1, "Force"}}), field({{1, "Arm"}, {1, "Id"}}),
+                        field({{1, "Unknown"}})};
+    auto item = f.monitor(sub, f.robot, 1, 0, toExtensionObject(ef), 0, true, 12);
+    ASSERT_TRUE(item.statusCode.isGood()) << item.statusCode.toString();
+    auto shared = std::make_shared<server::Event::Fields>();
+    shared->push_back({{QualifiedName{1, "Force"}}, Variant(Int32{1})});
+    shared->push_back({{QualifiedName{1, "Arm"}, QualifiedName{1, "Id"}}, Variant(UInt32{7})});
+    const std::shared_ptr<const server::Event::Fields> common = shared;
+    for (Int32 force : {20, 30}) {
+        server::Event e;
+        e.eventType = f.eventType;
+        e.sourceNode = f.gripper;
+        e.sharedFields = common;
+        e.set(QualifiedName{1, "Force"}, Variant(force));
+        f.server.fireEvent(std::move(e));
+    }
+    std::vector<EventFieldList> ev;
+    for (int i = 0; i < 20 && ev.size() < 2; ++i) {
+        auto got = eventsOf(f.publish());
+        ev.insert(ev.end(), got.begin(), got.end());
+    }
+    ASSERT_EQ(ev.size(), 2u);
+    for (std::size_t k = 0; k < 2; ++k) {
+        ASSERT_EQ(ev[k].eventFields.size(), 3u);
+        EXPECT_EQ(ev[k].eventFields[0], Variant(Int32{k == 0 ? 20 : 30}));
+        EXPECT_EQ(ev[k].eventFields[1], Variant(UInt32{7}));
+        EXPECT_TRUE(ev[k].eventFields[2].isEmpty());
+    }
+    EXPECT_EQ(common->size(), 2u);  // not consumed by the events
+}
+
 TEST(Events, WhereClauses) {
     EventFixture f;
     UInt32 sub = f.subscribe(10);
