@@ -1,4 +1,5 @@
-// Skills on loopback (server and client in this process, real sockets between them):
+// Skills on loopback (a skill server, by default `pnp demo-skills` as a process of its own,
+// and a client in this process, real sockets between them):
 //   (a) Start call -> the Running transition event at the client (the event item on the skill
 //       node, a Publish request waiting in the server), next to
 //   (b) the raw TCP round trip of a 64-byte frame to a blocking echo server set up like the

@@ -318,7 +318,6 @@ struct FiniteStateMachine::Impl {
         }
         availableStates = child(as, machine, {"AvailableStates"});
         availableTransitions = child(as, machine, {"AvailableTransitions"});
-
         for (std::size_t t = 0; t < transitions.size(); ++t) {
             for (const QualifiedName& cause : transitions[t].causes) {
                 auto m = std::find_if(methods.begin(), methods.end(),

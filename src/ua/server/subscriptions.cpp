@@ -159,21 +159,23 @@ Variant fieldValue(const EventRecord& r, const FieldRef& f) {
         if (n == "Message") return Variant(e.message);
         if (n == "Severity") return Variant(e.severity);
     }
-    static const Event::Fields kNone;
-    const Event::Fields& shared = e.sharedFields ? *e.sharedFields : kNone;
-    for (const Event::Fields* fields : {&e.fields, &shared})
-        for (const auto& [path, value] : *fields)
-            if (path == f.path) return value;
+    // The event's own fields first, then the shared ones.
+    auto find = [&](auto matches) -> const Variant* {
+        for (const Event::Fields* fields : {&e.fields, e.sharedFields.get()})
+            if (fields != nullptr)
+                for (const auto& [path, value] : *fields)
+                    if (matches(path)) return &value;
+        return nullptr;
+    };
+    const Variant* v = find([&](const auto& path) { return path == f.path; });
     // Clients often name custom fields without their namespace: match the names alone.
-    for (const Event::Fields* fields : {&e.fields, &shared})
-        for (const auto& [path, value] : *fields) {
-            if (path.size() != f.path.size()) continue;
-            bool same = true;
-            for (std::size_t i = 0; i < path.size() && same; ++i)
-                same = path[i].name == f.path[i].name;
-            if (same) return value;
-        }
-    return {};
+    if (v == nullptr)
+        v = find([&](const auto& path) {
+            return path.size() == f.path.size() &&
+                   std::equal(path.begin(), path.end(), f.path.begin(),
+                              [](const auto& a, const auto& b) { return a.name == b.name; });
+        });
+    return v != nullptr ? *v : Variant();
 }
 
 bool evaluateElement(const EventRecord& r, const CompiledEventFilter& f, UInt32 index, int depth);

@@ -130,6 +130,8 @@ thread_local const void* t_networkLockHolder = nullptr;  // the TcpServer::Impl
 // afterResponsesWritten(): run by this thread when it releases the network lock.
 thread_local std::vector<std::function<void()>> t_afterWrite;
 
+// Runs a function of the upper layer; what escapes it is the caller's problem, the calling
+// thread (network, service) goes on.
 void runDropping(const std::function<void()>& fn) noexcept {
     try {
         fn();
@@ -677,10 +679,7 @@ void TcpServer::Impl::scheduleTick(std::uint64_t generation) {
         if (ec) return;
         NetworkLock lock(*this);
         if (generation != tickGeneration) return;
-        try {
-            tickFn();
-        } catch (...) {
-        }
+        runDropping(tickFn);
         if (generation == tickGeneration) scheduleTick(generation);
     });
 }
@@ -783,11 +782,7 @@ void TcpServer::post(std::function<void()> fn) {
     auto* i = impl_.get();
     asio::post(i->io, [i, fn = std::move(fn)] {
         NetworkLock lock(*i);
-        try {
-            fn();
-        } catch (...) {
-            // The caller's problem; the service thread goes on.
-        }
+        runDropping(fn);
     });
 }
 
