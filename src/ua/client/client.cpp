@@ -187,7 +187,8 @@ class Client::Impl {
     // Blocking calls in progress (they read the socket themselves): the background thread
     // then leaves the socket's data alone and does not queue on the lock they hold.
     std::atomic<int> blockingCalls{0};
-    std::atomic<bool> asyncPending{false};  // as last seen by the background thread
+    mutable std::atomic<bool> wakeWanted{false};  // a wake() left to the end of a blocking call
+    std::atomic<bool> asyncPending{false};        // as last seen by the background thread
 
     // ---- helpers (all with the mutex held) ----------------------------------------------
 
@@ -213,12 +214,26 @@ class Client::Impl {
     // Makes the background thread re-evaluate what it waits for. Not needed on that thread
     // itself: after running callbacks it goes round its loop again before it waits (this
     // saves three system calls per data change, whose callback sends the next Publish).
+    // While a blocking call runs, the background thread waits for its end and for nothing
+    // else: a wake-up is then left to the end of the last blocking call (one system call and
+    // one thread woken, after the call's callbacks, instead of several before them).
     void wake() const {
-        if (wakeFd >= 0 &&
-            backgroundThreadId.load(std::memory_order_relaxed) != std::this_thread::get_id()) {
-            std::uint64_t one = 1;
-            [[maybe_unused]] auto r = ::write(wakeFd, &one, sizeof one);
-        }
+        if (wakeFd < 0 ||
+            backgroundThreadId.load(std::memory_order_relaxed) == std::this_thread::get_id())
+            return;
+        wakeWanted.store(true);
+        if (blockingCalls.load() == 0 && wakeWanted.exchange(false)) signalWakeFd();
+    }
+    // The end of a blocking call: delivers a wake-up left to it, and has the background thread
+    // watch the socket again if it has async requests pending.
+    void blockingCallEnded() {
+        if (blockingCalls.fetch_sub(1) == 1 && (wakeWanted.exchange(false) || asyncPending.load()))
+            signalWakeFd();
+    }
+    void signalWakeFd() const {
+        if (wakeFd < 0) return;
+        std::uint64_t one = 1;
+        [[maybe_unused]] auto r = ::write(wakeFd, &one, sizeof one);
     }
 
     void ensureWakeFd() {
@@ -849,9 +864,7 @@ void Client::roundTrip(EncodeRef encode, DecodeRef decode, bool idempotent, Dead
     struct Blocking {
         Impl& s;
         explicit Blocking(Impl& i) : s(i) { s.blockingCalls.fetch_add(1); }
-        ~Blocking() {
-            if (s.blockingCalls.fetch_sub(1) == 1 && s.asyncPending.load()) s.wake();
-        }
+        ~Blocking() { s.blockingCallEnded(); }
     } blocking(s);
     Completions done(s.completions);  // run after the lock is released
     std::lock_guard lock(s.mutex);
@@ -1322,7 +1335,7 @@ void Client::stopBackgroundThread() {
         std::lock_guard lock(s.mutex);
         if (!s.thread.joinable()) return;
         s.stopRequested = true;
-        s.wake();
+        s.signalWakeFd();
         // From a callback on the background thread itself: it ends when the callback
         // returns and is joined by the next start/stop or the destructor.
         if (s.thread.get_id() == std::this_thread::get_id()) return;

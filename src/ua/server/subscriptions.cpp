@@ -110,9 +110,39 @@ bool variantsEqual(const Variant& a, const Variant& b) {
 
 // ---- compiled event filters -----------------------------------------------------------------
 struct FieldRef {
+    // A BaseEventType field that Event holds as a member (resolved once, when compiled).
+    enum class Member : std::uint8_t {
+        None,
+        EventId,
+        EventType,
+        SourceNode,
+        SourceName,
+        Time,
+        ReceiveTime,
+        Message,
+        Severity
+    };
+    FieldRef() = default;
+    FieldRef(NodeId type, std::vector<QualifiedName> browsePath, UInt32 attribute)
+        : typeDefinition(std::move(type)), path(std::move(browsePath)), attributeId(attribute) {
+        if (path.size() != 1 || path[0].namespaceIndex != 0) return;
+        static constexpr std::pair<std::string_view, Member> kMembers[] = {
+            {"EventId", Member::EventId},
+            {"EventType", Member::EventType},
+            {"SourceNode", Member::SourceNode},
+            {"SourceName", Member::SourceName},
+            {"Time", Member::Time},
+            {"ReceiveTime", Member::ReceiveTime},
+            {"Message", Member::Message},
+            {"Severity", Member::Severity}};
+        for (const auto& [name, m] : kMembers)
+            if (path[0].name == name) member = m;
+    }
+
     NodeId typeDefinition;
     std::vector<QualifiedName> path;
     UInt32 attributeId = kAttrValue;
+    Member member = Member::None;
 };
 
 struct Operand {
@@ -143,21 +173,49 @@ bool hasType(const EventRecord& e, const NodeId& type) {
     return std::find(e.typeChain->begin(), e.typeChain->end(), type) != e.typeChain->end();
 }
 
-Variant fieldValue(const EventRecord& r, const FieldRef& f) {
+// hasType() for the select clauses of one item, which mostly name one type: the last answer
+// is kept.
+class TypeCheck {
+  public:
+    explicit TypeCheck(const EventRecord& r) : r_(r) {}
+    bool operator()(const NodeId& type) {
+        if (last_ == nullptr || !(*last_ == type)) {
+            last_ = &type;
+            answer_ = hasType(r_, type);
+        }
+        return answer_;
+    }
+
+  private:
+    const EventRecord& r_;
+    const NodeId* last_ = nullptr;
+    bool answer_ = false;
+};
+
+Variant fieldValue(const EventRecord& r, const FieldRef& f, TypeCheck& isOfType) {
     const Event& e = r.event;
-    if (!f.typeDefinition.isNull() && !hasType(r, f.typeDefinition)) return {};
+    if (!f.typeDefinition.isNull() && !isOfType(f.typeDefinition)) return {};
     if (f.path.empty()) return {};  // ConditionId / the event node itself: not a condition
     if (f.attributeId != kAttrValue) return {};
-    if (f.path.size() == 1 && f.path[0].namespaceIndex == 0) {
-        const std::string_view n = f.path[0].name;
-        if (n == "EventId") return Variant(e.eventId);
-        if (n == "EventType") return Variant(e.eventType);
-        if (n == "SourceNode") return Variant(e.sourceNode);
-        if (n == "SourceName") return Variant(e.sourceName);
-        if (n == "Time") return Variant(*e.time);
-        if (n == "ReceiveTime") return Variant(r.receiveTime);
-        if (n == "Message") return Variant(e.message);
-        if (n == "Severity") return Variant(e.severity);
+    switch (f.member) {
+        case FieldRef::Member::None:
+            break;
+        case FieldRef::Member::EventId:
+            return Variant(e.eventId);
+        case FieldRef::Member::EventType:
+            return Variant(e.eventType);
+        case FieldRef::Member::SourceNode:
+            return Variant(e.sourceNode);
+        case FieldRef::Member::SourceName:
+            return Variant(e.sourceName);
+        case FieldRef::Member::Time:
+            return Variant(*e.time);
+        case FieldRef::Member::ReceiveTime:
+            return Variant(r.receiveTime);
+        case FieldRef::Member::Message:
+            return Variant(e.message);
+        case FieldRef::Member::Severity:
+            return Variant(e.severity);
     }
     // The event's own fields first, then the shared ones.
     auto find = [&](auto matches) -> const Variant* {
@@ -185,8 +243,10 @@ Variant operandValue(const EventRecord& r, const CompiledEventFilter& f, const O
     switch (o.kind) {
         case Operand::Kind::Literal:
             return o.literal;
-        case Operand::Kind::Field:
-            return fieldValue(r, o.field);
+        case Operand::Kind::Field: {
+            TypeCheck isOfType(r);
+            return fieldValue(r, o.field, isOfType);
+        }
         case Operand::Kind::Element:
             return Variant(evaluateElement(r, f, o.element, depth + 1));
     }
@@ -1699,7 +1759,8 @@ void SubscriptionEngine::fireEvent(Event event) {
             if (!matches(r, f)) continue;
             std::vector<Variant> fields;
             fields.reserve(f.select.size());
-            for (const auto& sel : f.select) fields.push_back(fieldValue(r, sel));
+            TypeCheck isOfType(r);
+            for (const auto& sel : f.select) fields.push_back(fieldValue(r, sel, isOfType));
             auto& q = raw->events;
             if (q.size() >= raw->queueSize) {
                 if (raw->discardOldest)
