@@ -187,6 +187,9 @@ class Client::Impl {
     // Blocking calls in progress (they read the socket themselves): the background thread
     // then leaves the socket's data alone and does not queue on the lock they hold.
     std::atomic<int> blockingCalls{0};
+    // The blocking calls waiting for their responses (request id -> the response, once another
+    // blocking call read it while this one ran callbacks without the lock).
+    std::unordered_map<UInt32, std::optional<IncomingResponse>> awaited;
     mutable std::atomic<bool> wakeWanted{false};  // a wake() left to the end of a blocking call
     std::atomic<bool> asyncPending{false};        // as last seen by the background thread
 
@@ -250,12 +253,19 @@ class Client::Impl {
         }
     }
 
-    // A response that is not the one a blocking call waits for.
-    void route(IncomingResponse&& m, Completions& done) {
+    // A response that is not the one this thread waits for: another blocking call's (kept
+    // for it), or an async request's (its callback is queued). Returns whether a callback was
+    // queued.
+    bool route(IncomingResponse&& m, Completions& done) {
+        if (auto w = awaited.find(m.requestId); w != awaited.end()) {
+            m.body.own();  // read on by this thread before the other one takes it
+            w->second = std::move(m);
+            return false;
+        }
         auto it = pending.find(m.requestId);
         if (it == pending.end()) {
             ++stats.discardedResponses;
-            return;
+            return false;
         }
         notePossibleSessionLoss(m);
         m.body.own();  // the callback runs later, after more reads
@@ -263,6 +273,7 @@ class Client::Impl {
             cb(Result<IncomingResponse>(std::move(r)));
         });
         pending.erase(it);
+        return true;
     }
 
     void expireAsync(Clock::time_point now, Completions& done) {
@@ -310,10 +321,25 @@ class Client::Impl {
         backoff = config.reconnect.initialDelay;
     }
 
-    // Waits for the response with requestId `id`, routing others.
+    // Waits for the response with requestId `id` (sent on the current connection), routing
+    // others. With `lock` (the client's lock, held), callbacks of responses read meanwhile
+    // (a subscription's notifications) run at once, without the lock, instead of after the
+    // call: a long call does not hold them back, and what they send (the next Publish) goes
+    // out. Another thread may then read this call's response; it keeps it in `awaited`.
     IncomingResponse await(UInt32 id, Clock::time_point deadline, std::string_view service,
-                           Completions& done) {
+                           Completions& done, std::unique_lock<std::mutex>* lock = nullptr) {
+        const std::uint64_t sentOn = generation;
+        awaited.emplace(id, std::nullopt);
+        struct Forget {  // on every way out, with the lock held
+            std::unordered_map<UInt32, std::optional<IncomingResponse>>& awaited;
+            UInt32 id;
+            ~Forget() { awaited.erase(id); }
+        } forget{awaited, id};
         for (;;) {
+            if (auto& kept = awaited[id]) return std::move(*kept);
+            if (!conn || generation != sentOn)
+                throw TransportError(status::BadConnectionClosed,
+                                     "the connection was lost while waiting");
             std::optional<IncomingResponse> m =
                 conn->receive(std::min(deadline, nextAsyncDeadline));
             Clock::time_point now = m ? transport::coarseNow() : Clock::now();
@@ -327,16 +353,21 @@ class Client::Impl {
             }
             lastReceive = now;
             if (m->requestId == id) return std::move(*m);
-            route(std::move(*m), done);
+            if (route(std::move(*m), done) && lock != nullptr) {
+                lock->unlock();
+                done.run();
+                lock->lock();
+            }
         }
     }
 
     // One request on the current connection, no reconnect. TransportError passes through.
     IncomingResponse exchange(Client::EncodeRef encode, Clock::time_point deadline,
-                              std::string_view service, Completions& done, bool& sent) {
+                              std::string_view service, Completions& done, bool& sent,
+                              std::unique_lock<std::mutex>* lock = nullptr) {
         UInt32 id = sendRequest(encode, deadline);
         sent = true;
-        return await(id, deadline, service, done);
+        return await(id, deadline, service, done, lock);
     }
 
     // Encodes and sends one request on the current connection; returns its request id.
@@ -538,15 +569,17 @@ class Client::Impl {
         }
     }
 
+    // `lock`: see await().
     IncomingResponse roundTrip(Client::EncodeRef encode, bool idempotent,
                                Clock::time_point deadline, std::string_view service,
-                               Completions& done) {
+                               Completions& done, std::unique_lock<std::mutex>* lock = nullptr) {
         for (int attempt = 0;; ++attempt) {
             checkDeadline(deadline, service);
             ensureReady(deadline, service, done);
             bool sent = false;
+            const std::uint64_t sentOn = generation;
             try {
-                IncomingResponse r = exchange(encode, deadline, service, done, sent);
+                IncomingResponse r = exchange(encode, deadline, service, done, sent, lock);
                 if (attempt == 0 && config.reconnect.enabled &&
                     isSessionFault(r, config.decodeLimits)) {
                     // The server rejected the request without executing it: a new session
@@ -560,7 +593,9 @@ class Client::Impl {
             } catch (const TransportError& e) {
                 if (e.status() == status::BadRequestTooLarge && conn && conn->isOpen())
                     throw Error(e.status(), std::string(service) + ": " + e.message());
-                connectionLost(e.status(), done);
+                // Lost while this call ran callbacks: another thread saw it and may have
+                // connected again already.
+                if (conn && generation == sentOn) connectionLost(e.status(), done);
                 bool retry = attempt == 0 && config.reconnect.enabled &&
                              (!sent || (idempotent && config.reconnect.retryIdempotent));
                 if (!retry) throw Error(e.status(), std::string(service) + ": " + e.message());
@@ -866,11 +901,11 @@ void Client::roundTrip(EncodeRef encode, DecodeRef decode, bool idempotent, Dead
         explicit Blocking(Impl& i) : s(i) { s.blockingCalls.fetch_add(1); }
         ~Blocking() { s.blockingCallEnded(); }
     } blocking(s);
-    Completions done(s.completions);  // run after the lock is released
-    std::lock_guard lock(s.mutex);
+    Completions done(s.completions);  // run after the lock is released (and while waiting)
+    std::unique_lock lock(s.mutex);
     s.resolvedAt = Clock::now();
     Clock::time_point dl = deadline.resolve(s.resolvedAt, s.config.requestTimeout);
-    decode(s.roundTrip(encode, idempotent, dl, service, done), s.config.decodeLimits);
+    decode(s.roundTrip(encode, idempotent, dl, service, done, &lock), s.config.decodeLimits);
 }
 
 void Client::sendAsync(EncodeRef encode, Deadline deadline, std::string_view service,

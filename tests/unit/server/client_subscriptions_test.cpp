@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <memory>
@@ -77,6 +78,129 @@ TEST(ClientSubscriptions, DataChangesFromSetValueAndWrite) {
     const std::size_t before = got.items().size();
     ASSERT_TRUE(f.server.addressSpace().setValue(f.value, DataValue(Variant(Int32{11}))).isGood());
     EXPECT_FALSE(got.waitFor([&](auto& v) { return v.size() > before; }, 300ms));
+}
+
+// A long blocking call does not hold back the notifications that arrive while it waits: each
+// reaches its callback at once, and the Publish the callback sends goes out, so later ones
+// follow (the call's thread reads them; they are not left for the call's end).
+TEST(ClientSubscriptions, DataChangesArriveWhileABlockingCallWaits) {
+    Fixture f;
+    const NodeId slow(1, "Slow");
+    std::vector<std::thread> workers;
+    f.server.addressSpace().addMethod(
+        NodeId(0, ns0::ObjectsFolder), slow, QualifiedName{1, "Slow"}, {}, {},
+        [&](const server::MethodCallContext&, std::vector<Variant>, server::MethodCompletion done) {
+            workers.emplace_back([&f, done] {
+                for (Int32 v = 1; v <= 3; ++v) {
+                    std::this_thread::sleep_for(100ms);
+                    (void)f.server.addressSpace().setValue(f.value, DataValue(Variant(v)));
+                }
+                std::this_thread::sleep_for(600ms);
+                done.succeed({});
+            });
+        });
+    std::mutex m;
+    std::vector<std::pair<Int32, std::chrono::steady_clock::time_point>> arrived;
+    Inbox<DataValue> got;
+    client::Subscription sub(f.c, {.publishingInterval = 10});
+    client::MonitoredItem item = sub.monitorValue(
+        f.value,
+        [&](const DataValue& v) {
+            if (v.value && v.value->scalar<Int32>()) {
+                std::lock_guard l(m);
+                arrived.emplace_back(*v.value->scalar<Int32>(), std::chrono::steady_clock::now());
+            }
+            got.put(v);
+        },
+        {.samplingInterval = 0});
+    ASSERT_TRUE(got.waitFor([](auto& v) { return hasInt(v, 0); })) << "initial value";
+
+    const auto r = f.c.call(NodeId(0, ns0::ObjectsFolder), slow, {});
+    const auto returned = std::chrono::steady_clock::now();
+    EXPECT_TRUE(r.ok()) << r.status.toString();
+    {
+        std::lock_guard l(m);
+        for (Int32 v = 1; v <= 3; ++v) {
+            auto it = std::find_if(arrived.begin(), arrived.end(),
+                                   [v](const auto& a) { return a.first == v; });
+            ASSERT_NE(it, arrived.end()) << "value " << v << " never arrived";
+            // Set 100 / 200 / 300 ms into a 900 ms call: delivered long before it returned.
+            EXPECT_LT(it->second, returned - 300ms) << "value " << v << " held back by the call";
+        }
+    }
+    f.server.post([] {});  // the worker was created on the network thread; join it here
+    for (auto& w : workers) w.join();
+}
+
+// While a long call runs callbacks without the client's lock, other threads' calls use the
+// connection too (one of them may read the long call's response and keep it for it), and a
+// callback may make a blocking call itself. Everything completes, nothing is lost.
+TEST(ClientSubscriptions, CallsFromOtherThreadsAndFromCallbacksDuringALongCall) {
+    Fixture f;
+    const NodeId slow(1, "Slow");
+    std::atomic<bool> changing{true};
+    std::vector<std::thread> workers;
+    f.server.addressSpace().addMethod(
+        NodeId(0, ns0::ObjectsFolder), slow, QualifiedName{1, "Slow"}, {}, {},
+        [&](const server::MethodCallContext&, std::vector<Variant>, server::MethodCompletion done) {
+            workers.emplace_back([done] {
+                std::this_thread::sleep_for(600ms);
+                done.succeed({});
+            });
+        });
+    // A value change every 5 ms while the test runs.
+    std::thread changer([&] {
+        for (Int32 v = 1; changing && v < 2000; ++v) {
+            (void)f.server.addressSpace().setValue(f.value, DataValue(Variant(v)));
+            std::this_thread::sleep_for(5ms);
+        }
+    });
+    std::atomic<int> notifications{0}, nestedReads{0}, nestedFailures{0};
+    client::Subscription sub(f.c, {.publishingInterval = 10});
+    client::MonitoredItem item =
+        sub.monitorValue(f.value,
+                         [&](const DataValue&) {
+                             // Every fifth notification: a blocking Read from inside the callback.
+                             if (++notifications % 5 != 0) return;
+                             try {
+                                 (void)f.c.readValue(NodeId(0, ns0::Server_ServerStatus_State), 2s);
+                                 ++nestedReads;
+                             } catch (const std::exception&) {
+                                 ++nestedFailures;
+                             }
+                         },
+                         {.samplingInterval = 0});
+
+    std::atomic<bool> longCallDone{false};
+    std::atomic<int> reads{0}, readFailures{0};
+    std::thread reader([&] {
+        for (int i = 0; i < 100000 && !longCallDone; ++i) {
+            try {
+                (void)f.c.readValue(f.value, 2s);
+                ++reads;
+            } catch (const std::exception&) {
+                ++readFailures;
+            }
+        }
+    });
+    const auto start = std::chrono::steady_clock::now();
+    const auto r = f.c.call(NodeId(0, ns0::ObjectsFolder), slow, {}, 5s);
+    const auto took = std::chrono::steady_clock::now() - start;
+    longCallDone = true;
+    reader.join();
+    changing = false;
+    changer.join();
+    EXPECT_TRUE(r.ok()) << r.status.toString();
+    EXPECT_GE(took, 600ms);
+    EXPECT_LT(took, 3s);
+    EXPECT_EQ(readFailures.load(), 0);
+    EXPECT_EQ(nestedFailures.load(), 0);
+    EXPECT_GT(reads.load(), 5) << "the other thread's Reads waited for the long call";
+    EXPECT_GT(nestedReads.load(), 0);
+    EXPECT_EQ(f.c.stats().timeouts, 0u);
+    EXPECT_EQ(f.c.stats().discardedResponses, 0u) << "a response read by another thread was lost";
+    f.server.post([] {});  // the worker was created on the network thread; join it here
+    for (auto& w : workers) w.join();
 }
 
 TEST(ClientSubscriptions, EventsWithStandardAndCustomFields) {
