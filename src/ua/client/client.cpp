@@ -189,7 +189,21 @@ class Client::Impl {
     std::atomic<int> blockingCalls{0};
     // The blocking calls waiting for their responses (request id -> the response, once another
     // blocking call read it while this one ran callbacks without the lock).
-    std::unordered_map<UInt32, std::optional<IncomingResponse>> awaited;
+    // Threads waiting in lockForRequest(), and how often it was taken: a blocking call that lets
+    // go of the lock for callbacks hands it to them (std::mutex is not fair; the callbacks'
+    // own sends would otherwise rarely get in before the call takes it back).
+    std::atomic<int> lockWaiters{0};
+    std::atomic<std::uint64_t> lockTaken{0};
+    std::unique_lock<std::mutex> lockForRequest() {
+        lockWaiters.fetch_add(1);
+        std::unique_lock l(mutex);
+        lockWaiters.fetch_sub(1);
+        lockTaken.fetch_add(1);
+        return l;
+    }
+    // Keyed by awaitedKey(): request ids start again on every new channel.
+    std::unordered_map<std::uint64_t, std::optional<IncomingResponse>> awaited;
+    std::uint64_t awaitedKey(UInt32 requestId) const { return generation << 32 | requestId; }
     mutable std::atomic<bool> wakeWanted{false};  // a wake() left to the end of a blocking call
     std::atomic<bool> asyncPending{false};        // as last seen by the background thread
 
@@ -257,7 +271,7 @@ class Client::Impl {
     // for it), or an async request's (its callback is queued). Returns whether a callback was
     // queued.
     bool route(IncomingResponse&& m, Completions& done) {
-        if (auto w = awaited.find(m.requestId); w != awaited.end()) {
+        if (auto w = awaited.find(awaitedKey(m.requestId)); w != awaited.end()) {
             m.body.own();  // read on by this thread before the other one takes it
             w->second = std::move(m);
             return false;
@@ -329,14 +343,15 @@ class Client::Impl {
     IncomingResponse await(UInt32 id, Clock::time_point deadline, std::string_view service,
                            Completions& done, std::unique_lock<std::mutex>* lock = nullptr) {
         const std::uint64_t sentOn = generation;
-        awaited.emplace(id, std::nullopt);
+        const std::uint64_t key = awaitedKey(id);
+        awaited.emplace(key, std::nullopt);
         struct Forget {  // on every way out, with the lock held
-            std::unordered_map<UInt32, std::optional<IncomingResponse>>& awaited;
-            UInt32 id;
-            ~Forget() { awaited.erase(id); }
-        } forget{awaited, id};
+            std::unordered_map<std::uint64_t, std::optional<IncomingResponse>>& awaited;
+            std::uint64_t key;
+            ~Forget() { awaited.erase(key); }
+        } forget{awaited, key};
         for (;;) {
-            if (auto& kept = awaited[id]) return std::move(*kept);
+            if (auto& kept = awaited[key]) return std::move(*kept);
             if (!conn || generation != sentOn)
                 throw TransportError(status::BadConnectionClosed,
                                      "the connection was lost while waiting");
@@ -354,8 +369,14 @@ class Client::Impl {
             lastReceive = now;
             if (m->requestId == id) return std::move(*m);
             if (route(std::move(*m), done) && lock != nullptr) {
+                const std::uint64_t taken = lockTaken.load();
                 lock->unlock();
                 done.run();
+                // Another thread (one running callbacks whose next Publish waits for the
+                // lock, say) gets it first; bounded, in case it is not scheduled soon.
+                const auto until = Clock::now() + std::chrono::milliseconds(5);
+                while (lockWaiters.load() > 0 && lockTaken.load() == taken && Clock::now() < until)
+                    std::this_thread::yield();
                 lock->lock();
             }
         }
@@ -902,7 +923,7 @@ void Client::roundTrip(EncodeRef encode, DecodeRef decode, bool idempotent, Dead
         ~Blocking() { s.blockingCallEnded(); }
     } blocking(s);
     Completions done(s.completions);  // run after the lock is released (and while waiting)
-    std::unique_lock lock(s.mutex);
+    std::unique_lock lock = s.lockForRequest();
     s.resolvedAt = Clock::now();
     Clock::time_point dl = deadline.resolve(s.resolvedAt, s.config.requestTimeout);
     decode(s.roundTrip(encode, idempotent, dl, service, done, &lock), s.config.decodeLimits);
@@ -912,7 +933,7 @@ void Client::sendAsync(EncodeRef encode, Deadline deadline, std::string_view ser
                        RawCallback callback) {
     Impl& s = *impl_;
     Completions done(s.completions);
-    std::lock_guard lock(s.mutex);
+    std::unique_lock lock = s.lockForRequest();
     s.resolvedAt = Clock::now();
     Clock::time_point dl = deadline.resolve(s.resolvedAt, s.config.requestTimeout);
     try {
