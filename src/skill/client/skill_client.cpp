@@ -23,6 +23,12 @@ struct SkillClient::Queue {
     std::deque<Transition> items;
     std::uint64_t first = 0;  // sequence number of items.front()
     std::uint64_t taken = 0;  // cursor of takeTransitions() / nextTransition()
+    // The server's time of the end of the last run(): its events that arrive later (held back
+    // by the publishing interval after a polled end) are not taken for the next run's.
+    ua::DateTime lastRunEnded{};
+    bool earlier(const Transition& t) const {
+        return t.time != ua::DateTime{} && lastRunEnded != ua::DateTime{} && t.time <= lastRunEnded;
+    }
     // Replaced, never changed in place: an event takes the current set without copying it.
     using Callbacks = std::map<std::size_t, TransitionCallback>;
     std::shared_ptr<const Callbacks> callbacks = std::make_shared<const Callbacks>();
@@ -663,6 +669,7 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
             auto& q = *queue_;
             for (cursor = std::max(cursor, q.first); cursor < q.end(); ++cursor) {
                 const Transition& t = q.items[cursor - q.first];
+                if (q.earlier(t)) continue;  // a late event of the run before
                 if (t.to == ProgramState::Running && t.from == ProgramState::Ready) running = true;
                 if (running) out.transitions.push_back(t);  // not the late event of a Reset
             }
@@ -697,7 +704,8 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
             q.changed.wait_until(l, cancel, std::min({end, nextRenew, nextPoll}),
                                  [&] { return cursor < q.end(); });
             for (cursor = std::max(cursor, q.first); cursor < q.end(); ++cursor)
-                fresh.push_back(q.items[cursor - q.first]);
+                if (!q.earlier(q.items[cursor - q.first]))  // a late event of the run before
+                    fresh.push_back(q.items[cursor - q.first]);
         }
         for (auto& t : fresh) {
             if (t.to == ProgramState::Running && t.from == ProgramState::Ready) running = true;
@@ -740,6 +748,7 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
             if (!q.changed.wait_until(l, until, [&] { return cursor < q.end(); })) break;
             for (cursor = std::max(cursor, q.first); cursor < q.end(); ++cursor) {
                 const Transition& t = q.items[cursor - q.first];
+                if (q.earlier(t)) continue;
                 if (t.to == ProgramState::Running && t.from == ProgramState::Ready) running = true;
                 if (!running) continue;
                 out.transitions.push_back(t);
@@ -748,6 +757,15 @@ RunResult SkillClient::run(const NamedValues& params, Deadline deadline, std::st
         }
     }
     if (!polledEnd) out.finalResult = finalResult(cleanup());
+    // When this run ended, by the server's clock: LastTransition's time when polled, else its
+    // last event's (transitions synthesized from polls carry our clock and do not count).
+    ua::DateTime endedAt = polledEnd ? last.lastTransitionTime : ua::DateTime{};
+    for (const Transition& t : out.transitions)
+        if (!t.polled && t.time > endedAt) endedAt = t.time;
+    {
+        std::lock_guard l(queue_->mutex);
+        if (endedAt > queue_->lastRunEnded) queue_->lastRunEnded = endedAt;
+    }
     out.result = out.finalResult.result;
     out.message = out.finalResult.message;
     if (aborted && out.result != SkillResult::Completed && out.result != SkillResult::Failed) {

@@ -221,6 +221,27 @@ TEST(SkillClient, RunCompletes) {
                 us.back());
 }
 
+// With a long publishing interval, a no-op run's events are held back and its end is found by
+// polling; they arrive during the next run, which must not take them for its own (it would
+// end at once, with the result it has cleared: None).
+TEST(SkillClient, LateEventsOfAnEarlierRunAreNotTakenForTheNext) {
+    Cell cell;
+    SkillClient skill(cell.a, cell.delay, 5s, SkillClientOptions{.publishingInterval = 300});
+    for (int i = 0; i < 3; ++i) {
+        RunResult r = skill.run({{"DurationMs", 0.0}, {"FailWith", ua::String("")}}, 5s);
+        ASSERT_EQ(r.result, SkillResult::Completed) << "no-op run " << i << ": " << r.message;
+    }
+    // Started within the interval after the no-op runs' events: theirs arrive during it.
+    const auto t0 = ua::client::Clock::now();
+    RunResult r = skill.run({{"DurationMs", 500.0}}, 5s);
+    const auto took = ua::client::Clock::now() - t0;
+    EXPECT_EQ(r.result, SkillResult::Completed) << r.message;
+    EXPECT_GE(took, 500ms) << "ended on an earlier run's events";
+    ASSERT_FALSE(r.transitions.empty());
+    EXPECT_EQ(r.transitions.back().to, ProgramState::Ready);
+    EXPECT_EQ(numbersOf(r.transitions), (std::vector<ua::UInt32>{2, 4}));
+}
+
 TEST(SkillClient, RunFailsThenResetsOnTheNextRun) {
     Cell cell;
     SkillClient skill(cell.a, cell.delay, 5s);
