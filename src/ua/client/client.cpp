@@ -344,14 +344,19 @@ class Client::Impl {
                            Completions& done, std::unique_lock<std::mutex>* lock = nullptr) {
         const std::uint64_t sentOn = generation;
         const std::uint64_t key = awaitedKey(id);
-        awaited.emplace(key, std::nullopt);
+        // Registered in `awaited` only once the lock is first let go (before, nobody else
+        // reads): no map node per call that runs no callback.
         struct Forget {  // on every way out, with the lock held
             std::unordered_map<std::uint64_t, std::optional<IncomingResponse>>& awaited;
             std::uint64_t key;
-            ~Forget() { awaited.erase(key); }
+            bool registered = false;
+            ~Forget() {
+                if (registered) awaited.erase(key);
+            }
         } forget{awaited, key};
         for (;;) {
-            if (auto& kept = awaited[key]) return std::move(*kept);
+            if (forget.registered)
+                if (auto& kept = awaited[key]) return std::move(*kept);
             if (!conn || generation != sentOn)
                 throw TransportError(status::BadConnectionClosed,
                                      "the connection was lost while waiting");
@@ -369,6 +374,8 @@ class Client::Impl {
             lastReceive = now;
             if (m->requestId == id) return std::move(*m);
             if (route(std::move(*m), done) && lock != nullptr) {
+                if (!forget.registered) awaited.emplace(key, std::nullopt);
+                forget.registered = true;
                 const std::uint64_t taken = lockTaken.load();
                 lock->unlock();
                 done.run();
