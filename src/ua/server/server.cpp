@@ -129,6 +129,8 @@ void Server::post(std::function<void()> fn) {
         transport_->post(std::move(fn));
 }
 
+bool Server::isNetworkThread() const { return transport_->isNetworkThread(); }
+
 void Server::afterResponsesWritten(std::function<void()> fn) {
     transport_->afterResponsesWritten(std::move(fn));
 }

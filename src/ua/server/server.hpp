@@ -94,6 +94,9 @@ class Server : public transport::ServiceHandler {
     // left the network lock and written the responses queued so far, e.g. to wake a worker
     // that would otherwise compete with the response for the CPU. Elsewhere: at once.
     void afterResponsesWritten(std::function<void()> fn);
+    // True in a service or method handler: this thread holds the network lock, and no other
+    // request is served until the handler returns.
+    bool isNetworkThread() const;
 
     // Fires an event (any thread): monitored items on its SourceNode and on every notifier
     // above it up to the Server object receive it (see SubscriptionEngine::fireEvent).

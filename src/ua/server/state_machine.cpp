@@ -432,12 +432,19 @@ struct FiniteStateMachine::Impl {
         const std::size_t from = current;
         current = tr.to;
         last = t;
-        publish(DateTime::now());
+        // In a method handler (under the network lock) no other request is served before it
+        // returns: the event, which clients wait for, is written first, and the variables
+        // follow before anyone can read them. Elsewhere (a worker thread) the variables come
+        // first: a client that has the event may read them at once.
+        const DateTime now = DateTime::now();
+        const bool eventFirst = server.isNetworkThread();
+        if (!eventFirst) publish(now);
 
         const State& fs = states[from];
         const State& ts = states[tr.to];
         const EventTemplate& tmpl = eventTemplate(t);
         Event e;
+        e.time = now;
         e.eventType = tmpl.eventType;
         e.sourceNode = machine;
         e.sourceName = machineName;
@@ -462,6 +469,7 @@ struct FiniteStateMachine::Impl {
             e.fields.push_back(std::move(f));
         }
         server.fireEvent(std::move(e));
+        if (eventFirst) publish(now);
 
         if (!observer) {
             lock.unlock();

@@ -416,6 +416,7 @@ struct SamplingGroup {
 }  // namespace
 
 struct SubscriptionEngine::Impl {
+    using Connections = std::vector<std::shared_ptr<transport::ServerConnection>>;
     AddressSpace& as;
     SubscriptionLimits limits;
     DecodeLimits decodeLimits;
@@ -855,11 +856,13 @@ struct SubscriptionEngine::Impl {
         }
     }
 
-    // After a value was queued outside the timer: publish at once when the interval allows.
-    void publishEarly(Subscription& s, TimePoint now) {
+    // After a value or an event was queued outside the timer: answers a waiting Publish of
+    // `s` at once when the publishing interval allows; adds its connection to `sentOn`.
+    void publishEarly(Subscription& s, TimePoint now, Connections& sentOn) {
         if (!s.publishingEnabled) return;
         if (now - s.lastMessage < toDuration(s.publishingInterval) && s.sentFirstMessage) return;
         if (auto p = takePublish(s.session, now)) {
+            sentOn.push_back(p->conn);
             send(s, *p, false, now);
             s.nextCycle = now + toDuration(s.publishingInterval);
         } else {
@@ -867,19 +870,30 @@ struct SubscriptionEngine::Impl {
         }
     }
 
+    // A notification that a handler caused leaves before the rest of the handler's work
+    // (the request's own response, state variables that follow an event): called without
+    // the engine's lock.
+    static void flush(const Connections& sentOn) {
+        for (const auto& c : sentOn) c->flush();
+    }
+
     void onValue(const NodeId& node, const DataValue& value) {
-        std::lock_guard lock(mutex);
-        auto it = valueWatchers.find(node);
-        if (it == valueWatchers.end()) return;
-        auto now = Clock::now();
-        std::vector<Subscription*> touched;
-        for (MonitoredItem* raw : it->second) {
-            Subscription& s = *raw->subscription;
-            auto item = s.items.find(raw->id);
-            if (item == s.items.end()) continue;
-            if (applyValue(item->second, value)) touched.push_back(&s);
+        Connections sentOn;
+        {
+            std::lock_guard lock(mutex);
+            auto it = valueWatchers.find(node);
+            if (it == valueWatchers.end()) return;
+            auto now = Clock::now();
+            std::vector<Subscription*> touched;
+            for (MonitoredItem* raw : it->second) {
+                Subscription& s = *raw->subscription;
+                auto item = s.items.find(raw->id);
+                if (item == s.items.end()) continue;
+                if (applyValue(item->second, value)) touched.push_back(&s);
+            }
+            for (Subscription* s : touched) publishEarly(*s, now, sentOn);
         }
-        for (Subscription* s : touched) publishEarly(*s, now);
+        flush(sentOn);
     }
 
     // ---- the timer thread ----------------------------------------------------------------------
@@ -1747,34 +1761,38 @@ void SubscriptionEngine::fireEvent(Event event) {
     r.event = std::move(event);
     const Impl::Paths notifiers = m.cachedPath(false, r.event.sourceNode);
 
-    std::lock_guard lock(m.mutex);
-    auto now = Clock::now();
-    std::vector<Subscription*> touched;
-    for (const NodeId& n : *notifiers) {
-        auto it = m.eventWatchers.find(n);
-        if (it == m.eventWatchers.end()) continue;
-        for (MonitoredItem* raw : it->second) {
-            if (raw->mode == MonitoringMode::Disabled || !raw->eventFilter) continue;
-            const CompiledEventFilter& f = *raw->eventFilter;
-            if (!matches(r, f)) continue;
-            std::vector<Variant> fields;
-            fields.reserve(f.select.size());
-            TypeCheck isOfType(r);
-            for (const auto& sel : f.select) fields.push_back(fieldValue(r, sel, isOfType));
-            auto& q = raw->events;
-            if (q.size() >= raw->queueSize) {
-                if (raw->discardOldest)
-                    q.erase(q.begin());
-                else
-                    q.pop_back();
+    Impl::Connections sentOn;
+    {
+        std::lock_guard lock(m.mutex);
+        auto now = Clock::now();
+        std::vector<Subscription*> touched;
+        for (const NodeId& n : *notifiers) {
+            auto it = m.eventWatchers.find(n);
+            if (it == m.eventWatchers.end()) continue;
+            for (MonitoredItem* raw : it->second) {
+                if (raw->mode == MonitoringMode::Disabled || !raw->eventFilter) continue;
+                const CompiledEventFilter& f = *raw->eventFilter;
+                if (!matches(r, f)) continue;
+                std::vector<Variant> fields;
+                fields.reserve(f.select.size());
+                TypeCheck isOfType(r);
+                for (const auto& sel : f.select) fields.push_back(fieldValue(r, sel, isOfType));
+                auto& q = raw->events;
+                if (q.size() >= raw->queueSize) {
+                    if (raw->discardOldest)
+                        q.erase(q.begin());
+                    else
+                        q.pop_back();
+                }
+                q.push_back(std::move(fields));
+                Subscription& s = *raw->subscription;
+                auto item = s.items.find(raw->id);
+                if (item != s.items.end() && m.report(item->second)) touched.push_back(&s);
             }
-            q.push_back(std::move(fields));
-            Subscription& s = *raw->subscription;
-            auto item = s.items.find(raw->id);
-            if (item != s.items.end() && m.report(item->second)) touched.push_back(&s);
         }
+        for (Subscription* s : touched) m.publishEarly(*s, now, sentOn);
     }
-    for (Subscription* s : touched) m.publishEarly(*s, now);
+    Impl::flush(sentOn);
 }
 
 SubscriptionEngine::Statistics SubscriptionEngine::statistics() const {

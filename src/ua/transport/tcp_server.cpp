@@ -189,6 +189,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     const std::string& endpointUrl() const override { return channel_.endpointUrl(); }
     std::string peerAddress() const override { return peer_; }
     bool isClosed() const override { return closedFlag_.load(std::memory_order_acquire); }
+    void flush() override { (void)writeQueued(); }
 
     void send(UInt32 requestId, Buffer&& message) override {
         sendSpliced(requestId, std::move(message), Splices{}, nullptr);
@@ -320,7 +321,8 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
 
     enum class WriteResult { Drained, Stalled, Error };
 
-    // Writes queued output without blocking (any thread, not under the network lock).
+    // Writes queued output without blocking (any thread; under the network lock only by
+    // flush(), which takes outMutex_ in the same order as write()).
     // One thread writes at a time (writing_): a caller that finds another one writing
     // leaves its bytes to it, which writes until the queue is empty. Stalled: the socket
     // took less than everything.

@@ -91,6 +91,11 @@ class ServerConnection : public std::enable_shared_from_this<ServerConnection> {
 
     // True once the connection is closed or closing (any thread).
     virtual bool isClosed() const = 0;
+    // Writes what is queued for this connection now, from the calling thread (also under the
+    // network lock), instead of when the lock is released: for a message that should not
+    // wait for the rest of the request being served, e.g. a notification its handler
+    // caused. Never blocks: what the socket does not take now is written as usual.
+    virtual void flush() {}
 };
 
 class ServiceHandler {

@@ -130,6 +130,55 @@ TEST(ClientSubscriptions, DataChangesArriveWhileABlockingCallWaits) {
     }
 }
 
+// A notification that a method handler causes is written at once, not with the handler's
+// response: a data change and an event (each on a subscription of its own, so that each has a
+// Publish waiting) reach the client while the handler is still working.
+TEST(ClientSubscriptions, NotificationsCausedByAHandlerLeaveBeforeItsResponse) {
+    Fixture f;
+    const NodeId busy(1, "Busy");
+    f.server.addressSpace().addMethod(
+        NodeId(0, ns0::ObjectsFolder), busy, QualifiedName{1, "Busy"}, {}, {},
+        [&](const server::MethodCallContext&, std::vector<Variant>, server::MethodCompletion done) {
+            (void)f.server.addressSpace().setValue(f.value, DataValue(Variant(Int32{5})));
+            server::Event ev;
+            ev.message = LocalizedText("", "busy");
+            f.server.fireEvent(ev);
+            // Still on the network thread (a handler that works on after the notifications).
+            std::this_thread::sleep_for(400ms);
+            done.succeed({});
+        });
+    using TimePoint = std::chrono::steady_clock::time_point;
+    Inbox<TimePoint> changed, evented;
+    // No keep-alive during the test (one within an interval before the call would hold the
+    // notification back to the next publishing cycle).
+    const client::SubscriptionSettings quiet{
+        .publishingInterval = 10, .lifetimeCount = 3000, .maxKeepAliveCount = 1000};
+    client::Subscription values(f.c, quiet);
+    client::Subscription events(f.c, quiet);
+    client::MonitoredItem item = values.monitorValue(
+        f.value,
+        [&](const DataValue& v) {
+            if (v.value && v.value->scalar<Int32>() && *v.value->scalar<Int32>() == 5)
+                changed.put(std::chrono::steady_clock::now());
+        },
+        {.samplingInterval = 0});
+    client::MonitoredItem eventItem = events.monitorEvents(
+        NodeId(0, ns0::Server), {.select = {"Message"}},
+        [&](client::EventFields&) { evented.put(std::chrono::steady_clock::now()); });
+    // Both subscriptions have had their first message (the initial value, a keep-alive) and
+    // hold a Publish again.
+    std::this_thread::sleep_for(100ms);
+
+    const auto r = f.c.call(NodeId(0, ns0::ObjectsFolder), busy, {});
+    const auto returned = std::chrono::steady_clock::now();
+    EXPECT_TRUE(r.ok()) << r.status.toString();
+    ASSERT_TRUE(changed.waitForCount(1)) << "data change";
+    ASSERT_TRUE(evented.waitForCount(1)) << "event";
+    EXPECT_LT(changed.items().front(), returned - 250ms)
+        << "the data change waited for the response";
+    EXPECT_LT(evented.items().front(), returned - 250ms) << "the event waited for the response";
+}
+
 // While a long call runs callbacks without the client's lock, other threads' calls may use the
 // connection too (one of them may then read the long call's response and keep it for it), and
 // a callback may make a blocking call itself. Everything completes, nothing is lost.

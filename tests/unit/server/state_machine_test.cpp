@@ -280,6 +280,66 @@ TEST(StateMachine, TransitionEventPerTransition) {
     }
 }
 
+// A transition's event leaves before its state variables are written when a method caused it
+// (the network lock keeps every other request out meanwhile), after them when an application
+// thread did: either way, a client that has the event and reads CurrentState at once, on
+// another connection, reads the event's ToState, and LastTransition/TransitionTime is the
+// event's Time.
+TEST(StateMachine, AReaderThatHasTheEventSeesItsState) {
+    ProgramFixture f;
+    client::Client reader;
+    reader.connect(f.server.endpointUrl());
+    const NodeId current = f.node({"CurrentState", "Id"});
+    const NodeId transitionTime = f.node({"LastTransition", "TransitionTime"});
+    struct Seen {
+        NodeId toState, readState;
+        DateTime time, readTime;
+    };
+    Inbox<Seen> seen;
+    client::Subscription sub(f.c, {.publishingInterval = 0});
+    auto item = sub.monitorEvents(
+        NodeId(0, ns0::Server),
+        {.select = {"ToState/Id", "Time"},
+         .eventType = NodeId(0, ns0::TransitionEventType),
+         .where = client::whereOfType(NodeId(0, ns0::TransitionEventType))},
+        [&](client::EventFields& e) {
+            Seen s;
+            if (const auto* v = e.get("ToState/Id"); v && v->scalar<NodeId>())
+                s.toState = *v->scalar<NodeId>();
+            if (const auto* v = e.get("Time"); v && v->scalar<DateTime>())
+                s.time = *v->scalar<DateTime>();
+            // A blocking Read from the callback, on the other client's connection.
+            std::vector<ReadValueId> nodes(2);
+            nodes[0].nodeId = current;
+            nodes[1].nodeId = transitionTime;
+            for (auto& n : nodes) n.attributeId = static_cast<UInt32>(AttributeId::Value);
+            const auto values = reader.read(std::move(nodes));
+            if (values.size() == 2 && values[0].value && values[0].value->scalar<NodeId>())
+                s.readState = *values[0].value->scalar<NodeId>();
+            if (values.size() == 2 && values[1].value && values[1].value->scalar<DateTime>())
+                s.readTime = *values[1].value->scalar<DateTime>();
+            seen.put(s);
+        });
+    constexpr int kRounds = 20;
+    std::size_t expected = 0;
+    for (int round = 0; round < kRounds; ++round) {
+        for (const Step& step : kLifecycle) {
+            // Alternately caused by a client's method call and by the application.
+            if (round % 2 == 0)
+                ASSERT_EQ(f.call(step.method), status::Good) << step.method;
+            else
+                ASSERT_EQ(f.fsm->fire(step.transition), status::Good) << step.transition;
+            ASSERT_TRUE(seen.waitForCount(++expected)) << step.transition;
+        }
+    }
+    const auto got = seen.items();
+    for (std::size_t i = 0; i < got.size(); ++i) {
+        EXPECT_FALSE(got[i].toState.isNull()) << i;
+        EXPECT_EQ(got[i].readState, got[i].toState) << "event " << i << " read an older state";
+        EXPECT_EQ(got[i].readTime.ticks, got[i].time.ticks) << "event " << i;
+    }
+}
+
 TEST(StateMachine, DataChangesOnCurrentState) {
     ProgramFixture f;
     Inbox<std::string> values;
