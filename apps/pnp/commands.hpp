@@ -127,6 +127,7 @@ struct SkillRunOptions {
     bool noMdns = false;
     int mdnsPort = 5353;
     int discoverMs = 3000;  // how long to look for a skill of TYPE
+    int repeat = 1;         // runs in a row on one connection (a soak test: a summary only)
 };
 // Exit code of a run that ended Failed, Aborted or timed out.
 inline constexpr int kExitSkillFailed = 3;

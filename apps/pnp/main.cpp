@@ -190,9 +190,17 @@ int main(int argc, char** argv) {
     skillRun->add_option("--skill", skillRunOpts.skill,
                          "the skill's name on its component (when there are several)");
     skillRun->add_flag("--json", skillRunOpts.json, "print one JSON object");
-    skillRun->add_option("--timeout", skillRunOpts.timeoutMs, "deadline of the whole run, ms")
+    skillRun
+        ->add_option("--timeout", skillRunOpts.timeoutMs,
+                     "deadline of the whole run (of each run with --repeat), ms")
         ->capture_default_str()
         ->check(CLI::Range(1, 86400000));
+    skillRun
+        ->add_option("--repeat", skillRunOpts.repeat,
+                     "run it this many times in a row on one connection and print a summary "
+                     "(results, median / p99 / max duration): a soak test")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 1000000));
     skillRun->add_option("--lds", skillRunOpts.lds, "look for TYPE at this LDS-ME too");
     skillRun->add_flag("--no-mdns", skillRunOpts.noMdns, "no multicast (with --lds)");
     skillRun->add_option("--mdns-port", skillRunOpts.mdnsPort, "mDNS UDP port")

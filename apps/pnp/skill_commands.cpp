@@ -4,8 +4,12 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <iostream>
+#include <map>
 #include <mutex>
+#include <string>
+#include <vector>
 
 #include "commands.hpp"
 #include "discovery_commands.hpp"
@@ -133,6 +137,69 @@ int runSkills(const SkillsOptions& o) {
     return kExitOk;
 }
 
+namespace {
+
+// `pnp skill run --repeat N`: N runs in a row, each with its own deadline (the first one's is
+// the command's, which also covered finding the skill), then a summary.
+int repeatRuns(const SkillRunOptions& o, const DetectedSkill& target,
+               skill::client::GenericSkillClient& skill, const skill::client::NamedValues& params,
+               std::chrono::steady_clock::time_point firstDeadline) {
+    using namespace std::chrono;
+    std::map<std::string, int> results;  // Completed / Failed / Aborted / TimedOut / ...
+    std::vector<double> ms;
+    ms.reserve(static_cast<std::size_t>(o.repeat));
+    std::string firstProblem;
+    for (int i = 0; i < o.repeat; ++i) {
+        const auto t0 = steady_clock::now();
+        const auto deadline = i == 0 ? firstDeadline : t0 + milliseconds(o.timeoutMs);
+        skill::client::RunResult r = skill.run(params, deadline);
+        ms.push_back(duration<double, std::milli>(steady_clock::now() - t0).count());
+        const std::string result = r.timedOut ? "TimedOut" : std::string(skill::toString(r.result));
+        ++results[result];
+        if (result != "Completed" && firstProblem.empty())
+            firstProblem = "run " + std::to_string(i + 1) + ": " + result +
+                           (r.message.empty() ? "" : ": " + r.message);
+    }
+    std::sort(ms.begin(), ms.end());
+    auto rank = [&](double q) {
+        const auto k = static_cast<std::size_t>(q * static_cast<double>(ms.size()) + 0.999999);
+        return ms[std::min(ms.size(), std::max<std::size_t>(k, 1)) - 1];
+    };
+    const double median =
+        ms.size() % 2 ? ms[ms.size() / 2] : (ms[ms.size() / 2 - 1] + ms[ms.size() / 2]) / 2;
+    const bool ok = results["Completed"] == o.repeat;
+    if (o.json) {
+        Json j = toJson(target);
+        j["runs"] = o.repeat;
+        Json counts = Json::object();
+        for (const auto& [name, n] : results)
+            if (n > 0) counts[name] = n;
+        j["results"] = counts;
+        j["durationMs"] = {{"median", median}, {"p99", rank(0.99)}, {"max", ms.back()}};
+        if (!firstProblem.empty()) j["firstProblem"] = firstProblem;
+        std::cout << j.dump(2) << std::endl;
+    } else {
+        std::cout << o.repeat << " runs:";
+        const char* sep = " ";
+        for (const auto& [name, n] : results)
+            if (n > 0) {
+                std::cout << sep << n << " " << name;
+                sep = ", ";
+            }
+        auto text = [](double x) {
+            char b[32];
+            std::snprintf(b, sizeof b, "%.3f ms", x);
+            return std::string(b);
+        };
+        std::cout << "; duration median " << text(median) << ", p99 " << text(rank(0.99))
+                  << ", max " << text(ms.back()) << std::endl;
+        if (!firstProblem.empty()) std::cout << "first problem: " << firstProblem << std::endl;
+    }
+    return ok ? kExitOk : kExitSkillFailed;
+}
+
+}  // namespace
+
 int runSkillRun(const SkillRunOptions& o) {
     using namespace std::chrono;
     const bool byUrl = o.target.starts_with("opc.tcp://");
@@ -203,6 +270,7 @@ int runSkillRun(const SkillRunOptions& o) {
     if (!o.json)
         std::cout << "running " << target.controllerName << "/" << target.name << " ("
                   << target.type.name << ") on " << target.endpointUrl << std::endl;
+    if (o.repeat > 1) return repeatRuns(o, target, skill, params, deadline);
     skill::client::RunResult r = skill.run(params, deadline);
 
     const bool ok = r.result == skill::SkillResult::Completed && !r.timedOut;

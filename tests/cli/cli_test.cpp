@@ -830,6 +830,21 @@ TEST(CliSkills, SkillsListsTheDemoSkillsAndSkillRunRunsThem) {
     r = run({"skill", "run", url, "--skill", "Delay", "DurationMs=1", "FailWith="});
     EXPECT_EQ(r.exitCode, 0) << describe(r);
     EXPECT_NE(r.out.find("Completed"), std::string::npos) << r.out;
+    // --repeat: runs in a row on one connection, a summary of the results and durations.
+    r = run({"skill", "run", url, "--skill", "Delay", "DurationMs=0", "--repeat", "50", "--json"});
+    ASSERT_EQ(r.exitCode, 0) << describe(r);
+    j = parseJson(r);
+    EXPECT_EQ(j.value("runs", 0), 50);
+    EXPECT_EQ(j.at("results").value("Completed", 0), 50) << r.out;
+    EXPECT_GT(j.at("durationMs").value("median", 0.0), 0.0) << r.out;
+    EXPECT_GE(j.at("durationMs").value("max", 0.0), j.at("durationMs").value("median", 0.0));
+    r = run({"skill", "run", url, "--skill", "Delay", "DurationMs=1", "FailWith=jammed", "--repeat",
+             "3"});
+    EXPECT_EQ(r.exitCode, 3) << describe(r);
+    EXPECT_NE(r.out.find("3 runs: 3 Failed"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("first problem: run 1: Failed: jammed"), std::string::npos) << r.out;
+    r = run({"skill", "run", url, "--skill", "Delay", "DurationMs=1", "FailWith="});
+    EXPECT_EQ(r.exitCode, 0) << describe(r);
     // Past the deadline: halted, exit 3.
     r = run({"skill", "run", url, "--skill", "Delay", "DurationMs=10000", "--timeout", "300"});
     EXPECT_EQ(r.exitCode, 3) << describe(r);
