@@ -6,6 +6,10 @@
 #   scripts/build.sh fuzz       -> build-fuzz/  clang >= 16, -DPNP_FUZZ=ON -DPNP_SANITIZE=ON,
 #                                  tests/benchmarks off; builds only the targets under fuzz/
 #                                  (CMake's "fuzz/all"); exits 3 if no usable clang
+#   scripts/build.sh pgo        -> build-pgo/   RelWithDebInfo, profile-guided (g++): pnp is
+#                                  built instrumented, trained with scripts/pgo-train.sh, then
+#                                  pnp and the benchmarks are built with the profile; tests off
+#                                  (the optimised build of a cell; compiles twice)
 #
 # Environment:
 #   PNP_ASAN_COMPILER=gcc|clang  compiler family of the asan build (default gcc, the
@@ -65,8 +69,14 @@ case "$MODE" in
         ARGS+=("-DCMAKE_CXX_COMPILER=$CXX_PATH")
         TARGET=(--target fuzz/all)
         ;;
+    pgo)
+        DIR="$ROOT/build-pgo"
+        CXX_PATH="$(command -v g++)"
+        ARGS+=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DPNP_SANITIZE=OFF -DPNP_FUZZ=OFF
+            -DPNP_BUILD_TESTS=OFF "-DCMAKE_CXX_COMPILER=$CXX_PATH")
+        ;;
     *)
-        echo "usage: $0 [release|asan|fuzz]" >&2
+        echo "usage: $0 [release|asan|fuzz|pgo]" >&2
         exit 2
         ;;
 esac
@@ -86,6 +96,27 @@ fi
 
 # shellcheck disable=SC2206
 EXTRA=(${PNP_CMAKE_ARGS:-})
+
+# Profile-guided: pnp is built instrumented, trained, and everything is built again with the
+# profile, in the same tree (GCC checks a profile against the source file's path, and the
+# generated sources live in the tree): each run compiles twice.
+if [[ "$MODE" == pgo ]]; then
+    log "configure pgo (instrumented) -> ${DIR#"$ROOT"/}"
+    cmake -S "$ROOT" -B "$DIR" "${ARGS[@]}" -DPNP_BUILD_BENCH=OFF -DPNP_PGO=generate \
+        "-DPNP_PGO_DIR=$DIR/pgo-profile" "${EXTRA[@]}"
+    log "build the instrumented pnp (-j$JOBS)"
+    cmake --build "$DIR" -j "$JOBS" --target pnp
+    rm -rf "$DIR/pgo-profile"  # profiles add up: start from none
+    log "train: scripts/pgo-train.sh"
+    bash "$ROOT/scripts/pgo-train.sh" "$DIR/apps/pnp/pnp"
+    n="$(find "$DIR/pgo-profile" -name '*.gcda' 2>/dev/null | wc -l)"
+    if ((n == 0)); then
+        log "ERROR: the training wrote no profile"
+        exit 1
+    fi
+    log "$n profiles in ${DIR#"$ROOT"/}/pgo-profile"
+    ARGS+=(-DPNP_BUILD_BENCH=ON -DPNP_PGO=use "-DPNP_PGO_DIR=$DIR/pgo-profile")
+fi
 log "configure $MODE -> ${DIR#"$ROOT"/} ${CXX_PATH:+(CXX=$CXX_PATH)}"
 cmake -S "$ROOT" -B "$DIR" "${ARGS[@]}" "${EXTRA[@]}"
 log "build $MODE (-j$JOBS)"

@@ -224,19 +224,19 @@ if [[ "$INTEROP" == "off" ]]; then
     step_result "interop" "skip" "PNP_INTEROP=off"
 else
     run_interop "interop node client vs node server" "$LOGS/interop-node-self.log" \
-        bash "$ROOT/tests/interop/run_node_self_test.sh" "$(free_port 48500)"
+        bash "$ROOT/tests/interop/run_node_self_test.sh" "$(free_port 28500)"
 
     if [[ $RELEASE_OK -eq 1 && -x "$PNP_BIN" ]]; then
         run_interop "interop node client vs pnp" "$LOGS/interop-node-vs-pnp.log" \
-            bash "$ROOT/tests/interop/run_node_client_vs_pnp.sh" "$PNP_BIN" "$(free_port 48520)"
+            bash "$ROOT/tests/interop/run_node_client_vs_pnp.sh" "$PNP_BIN" "$(free_port 28520)"
 
         run_interop "interop node subscriber vs pnp" "$LOGS/interop-node-subscriber-vs-pnp.log" \
-            bash "$ROOT/tests/interop/run_node_client_vs_pnp.sh" "$PNP_BIN" "$(free_port 48560)" \
+            bash "$ROOT/tests/interop/run_node_client_vs_pnp.sh" "$PNP_BIN" "$(free_port 28560)" \
             node_subscriber.js
 
         banner "tshark capture of pnp"
         if PNP_CAPTURE_DIR="$LOGS/capture" timeout -k 10 180 \
-            bash "$ROOT/tests/interop/capture_tshark.sh" "$PNP_BIN" "$(free_port 48540)" \
+            bash "$ROOT/tests/interop/capture_tshark.sh" "$PNP_BIN" "$(free_port 28540)" \
             2>&1 | tee "$LOGS/capture-tshark.log"; then
             PASSED=$((PASSED + 1))
             step_result "tshark capture of pnp" "ok"

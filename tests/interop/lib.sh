@@ -77,9 +77,11 @@ stop_pid() {
     wait "$pid" 2>/dev/null || true
 }
 
-# free_port [START]: prints a TCP port (START..START+199) nothing listens on.
+# free_port [START]: prints a TCP port (START..START+199) nothing listens on. Below the
+# kernel's ephemeral range (32768-60999 by default): a port there can be taken as the local
+# port of an outgoing connection between this check and the server's bind (EADDRINUSE).
 free_port() {
-    local p="${1:-48400}" i
+    local p="${1:-28400}" i
     for ((i = 0; i < 200; i++)); do
         if ! port_listening "$((p + i))"; then
             echo "$((p + i))"

@@ -7,5 +7,5 @@ set -uo pipefail
 export INTEROP_NAME=node-self-test
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
-PORT="${1:-$(free_port 48450)}"
+PORT="${1:-$(free_port 28450)}"
 exec bash "$INTEROP_DIR/run_node_client_vs_pnp.sh" "$INTEROP_DIR/node_server_as_pnp.sh" "$PORT"
