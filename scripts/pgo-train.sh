@@ -12,12 +12,13 @@ PNP="${1:?usage: $0 PNP_EXE}"
 log() { printf '[pgo-train] %s\n' "$*" >&2; }
 tmp="$(mktemp -d)"
 pids=()
-cleanup() {
+# Stops the servers by PID with SIGTERM: they exit normally and write their profiles.
+stop_servers() {
     for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
     for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
-    rm -rf "$tmp"
+    pids=()
 }
-trap cleanup EXIT
+trap 'stop_servers; rm -rf "$tmp"' EXIT
 
 # Starts a server (its arguments) and sets URL from its "listening on URL" line (10 s at most).
 start_server() {
@@ -34,12 +35,6 @@ start_server() {
     exit 1
 }
 
-# Stops the servers by PID with SIGTERM: they exit normally and write their profiles.
-stop_servers() {
-    for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
-    for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
-    pids=()
-}
 
 log "skills: pnp demo-skills, pnp skill run, pnp skills"
 start_server demo-skills --host 127.0.0.1 --port 0 --no-register

@@ -187,8 +187,6 @@ class Client::Impl {
     // Blocking calls in progress (they read the socket themselves): the background thread
     // then leaves the socket's data alone and does not queue on the lock they hold.
     std::atomic<int> blockingCalls{0};
-    // The blocking calls waiting for their responses (request id -> the response, once another
-    // blocking call read it while this one ran callbacks without the lock).
     // Threads waiting in lockForRequest(), and how often it was taken: a blocking call that lets
     // go of the lock for callbacks hands it to them (std::mutex is not fair; the callbacks'
     // own sends would otherwise rarely get in before the call takes it back).
@@ -201,7 +199,9 @@ class Client::Impl {
         lockTaken.fetch_add(1);
         return l;
     }
-    // Keyed by awaitedKey(): request ids start again on every new channel.
+    // The blocking calls waiting for their responses (-> the response, once another blocking
+    // call read it while this one ran callbacks without the lock). Keyed by awaitedKey():
+    // request ids start again on every new channel.
     std::unordered_map<std::uint64_t, std::optional<IncomingResponse>> awaited;
     std::uint64_t awaitedKey(UInt32 requestId) const { return generation << 32 | requestId; }
     mutable std::atomic<bool> wakeWanted{false};  // a wake() left to the end of a blocking call
