@@ -366,6 +366,54 @@ bool DiagnosticInfo::operator==(const DiagnosticInfo& o) const {
 }
 
 // ---- Variant -----------------------------------------------------------------------------
+// The storage's special members and alternative switches, compiled here once (builtin.hpp).
+Variant::Variant() noexcept = default;
+Variant::Variant(const Variant& o) = default;
+Variant::Variant(Variant&& o) noexcept = default;
+Variant& Variant::operator=(const Variant& o) = default;
+Variant& Variant::operator=(Variant&& o) noexcept = default;
+Variant::~Variant() = default;
+Variant::Variant(const char* s) : data_(String(s)) {}
+
+#define PNP_UA_VARIANT_ASSIGN(T)                              \
+    void Variant::assignScalar(T&& v) {                       \
+        data_.template emplace<Slot<T>>(std::move(v));        \
+        dims_.clear();                                        \
+    }                                                         \
+    void Variant::assignArray(std::vector<T>&& v) {           \
+        data_.template emplace<std::vector<T>>(std::move(v)); \
+        dims_.clear();                                        \
+    }
+PNP_UA_VARIANT_ASSIGN(Boolean)
+PNP_UA_VARIANT_ASSIGN(SByte)
+PNP_UA_VARIANT_ASSIGN(Byte)
+PNP_UA_VARIANT_ASSIGN(Int16)
+PNP_UA_VARIANT_ASSIGN(UInt16)
+PNP_UA_VARIANT_ASSIGN(Int32)
+PNP_UA_VARIANT_ASSIGN(UInt32)
+PNP_UA_VARIANT_ASSIGN(Int64)
+PNP_UA_VARIANT_ASSIGN(UInt64)
+PNP_UA_VARIANT_ASSIGN(Float)
+PNP_UA_VARIANT_ASSIGN(Double)
+PNP_UA_VARIANT_ASSIGN(String)
+PNP_UA_VARIANT_ASSIGN(DateTime)
+PNP_UA_VARIANT_ASSIGN(Guid)
+PNP_UA_VARIANT_ASSIGN(ByteString)
+PNP_UA_VARIANT_ASSIGN(XmlElement)
+PNP_UA_VARIANT_ASSIGN(NodeId)
+PNP_UA_VARIANT_ASSIGN(ExpandedNodeId)
+PNP_UA_VARIANT_ASSIGN(StatusCode)
+PNP_UA_VARIANT_ASSIGN(QualifiedName)
+PNP_UA_VARIANT_ASSIGN(LocalizedText)
+PNP_UA_VARIANT_ASSIGN(ExtensionObject)
+PNP_UA_VARIANT_ASSIGN(DataValue)
+PNP_UA_VARIANT_ASSIGN(DiagnosticInfo)
+#undef PNP_UA_VARIANT_ASSIGN
+void Variant::assignArray(std::vector<Variant>&& v) {
+    data_.template emplace<std::vector<Variant>>(std::move(v));
+    dims_.clear();
+}
+
 std::size_t Variant::arrayLength() const {
     return std::visit(
         [](const auto& x) -> std::size_t {

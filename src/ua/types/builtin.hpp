@@ -381,17 +381,30 @@ PNP_UA_BUILTIN_OF(DiagnosticInfo, DiagnosticInfo);
 #undef PNP_UA_BUILTIN_OF
 
 // A scalar, a one-dimensional array or a matrix (array + dimensions) of one built-in type.
+//
+// Compile time: the storage is a std::variant of 51 alternatives, and every function that may
+// construct, copy, assign or destroy it visits all of them. Those functions are declared here
+// and defined once in builtin.cpp; the templates below only pick the alternative and call
+// them, so a file that copies a Variant compiles none of that code itself.
 class Variant {
   public:
-    Variant() = default;
+    Variant() noexcept;
+    Variant(const Variant& o);
+    Variant(Variant&& o) noexcept;
+    Variant& operator=(const Variant& o);
+    Variant& operator=(Variant&& o) noexcept;
+    ~Variant();
+
     Variant(const char* s);  // NOLINT
     template <class T, class = decltype(BuiltinTypeOf<std::decay_t<T>>::value),
               class = std::enable_if_t<!std::is_same_v<std::decay_t<T>, Variant>>>
-    Variant(T&& v) {  // NOLINT: implicit so that `Variant v = 42;` reads naturally
+    Variant(T&& v) : Variant() {  // NOLINT: implicit so that `Variant v = 42;` reads naturally
         set(std::forward<T>(v));
     }
     template <class T, class = decltype(BuiltinTypeOf<T>::value)>
-    Variant(std::vector<T> v) : data_(std::move(v)) {}  // NOLINT
+    Variant(std::vector<T> v) : Variant() {  // NOLINT
+        assignArray(std::move(v));
+    }
 
     bool isEmpty() const { return data_.index() == 0; }
     bool isScalar() const { return !isEmpty() && data_.index() < kBuiltinTypeCount; }
@@ -417,17 +430,20 @@ class Variant {
     std::vector<T>* array() {
         return std::get_if<std::vector<T>>(&data_);
     }
+    // Replaces the value (and clears the dimensions). T is one of the built-in types.
     template <class T>
     void set(T&& v) {
         using U = std::decay_t<T>;
         static_assert(!std::is_same_v<U, Variant>, "a Variant cannot hold a scalar Variant");
-        data_.template emplace<Slot<U>>(std::forward<T>(v));
-        dims_.clear();
+        static_assert(BuiltinTypeOf<U>::value != BuiltinType::Null, "not a built-in type");
+        if constexpr (std::is_same_v<std::remove_cvref_t<T>, U> && !std::is_lvalue_reference_v<T>)
+            assignScalar(std::move(v));
+        else
+            assignScalar(U(v));  // a copy, moved in
     }
     template <class T>
     void setArray(std::vector<T> v) {
-        data_ = std::move(v);
-        dims_.clear();
+        assignArray(std::move(v));
     }
 
     detail::VariantStorage& storage() { return data_; }
@@ -450,6 +466,38 @@ class Variant {
         return *v;
     }
 
+    // One overload per built-in type (arrays: also of Variant), defined in builtin.cpp (see
+    // the class comment). Each replaces the value and clears the dimensions.
+#define PNP_UA_VARIANT_ASSIGN(T) \
+    void assignScalar(T&& v);    \
+    void assignArray(std::vector<T>&& v)
+    PNP_UA_VARIANT_ASSIGN(Boolean);
+    PNP_UA_VARIANT_ASSIGN(SByte);
+    PNP_UA_VARIANT_ASSIGN(Byte);
+    PNP_UA_VARIANT_ASSIGN(Int16);
+    PNP_UA_VARIANT_ASSIGN(UInt16);
+    PNP_UA_VARIANT_ASSIGN(Int32);
+    PNP_UA_VARIANT_ASSIGN(UInt32);
+    PNP_UA_VARIANT_ASSIGN(Int64);
+    PNP_UA_VARIANT_ASSIGN(UInt64);
+    PNP_UA_VARIANT_ASSIGN(Float);
+    PNP_UA_VARIANT_ASSIGN(Double);
+    PNP_UA_VARIANT_ASSIGN(String);
+    PNP_UA_VARIANT_ASSIGN(DateTime);
+    PNP_UA_VARIANT_ASSIGN(Guid);
+    PNP_UA_VARIANT_ASSIGN(ByteString);
+    PNP_UA_VARIANT_ASSIGN(XmlElement);
+    PNP_UA_VARIANT_ASSIGN(NodeId);
+    PNP_UA_VARIANT_ASSIGN(ExpandedNodeId);
+    PNP_UA_VARIANT_ASSIGN(StatusCode);
+    PNP_UA_VARIANT_ASSIGN(QualifiedName);
+    PNP_UA_VARIANT_ASSIGN(LocalizedText);
+    PNP_UA_VARIANT_ASSIGN(ExtensionObject);
+    PNP_UA_VARIANT_ASSIGN(DataValue);
+    PNP_UA_VARIANT_ASSIGN(DiagnosticInfo);
+#undef PNP_UA_VARIANT_ASSIGN
+    void assignArray(std::vector<Variant>&& v);
+
     detail::VariantStorage data_;
     std::vector<Int32> dims_;
 };
@@ -467,9 +515,6 @@ struct DataValue {
     StatusCode statusOrGood() const { return status.value_or(StatusCode{}); }
     bool operator==(const DataValue&) const = default;
 };
-
-// Out of line: building the storage needs DataValue complete (clang rejects it earlier).
-inline Variant::Variant(const char* s) : data_(String(s)) {}
 
 }  // namespace pnp::ua
 
