@@ -269,6 +269,29 @@ class Gen:
         result.sort()
         return result
 
+    # One header per NodeClass, so that a file includes only the ids it uses; ns0_ids.hpp
+    # includes them all.
+    ID_CLASSES = (
+        ("ReferenceType", "reference_types", "ReferenceTypes"),
+        ("DataType", "data_types", "DataTypes (their encodings are Objects)"),
+        ("ObjectType", "object_types", "ObjectTypes"),
+        ("VariableType", "variable_types", "VariableTypes"),
+        ("Object", "objects", "Objects (instances, DataType encodings, ...)"),
+        ("Variable", "variables", "Variables (instances and InstanceDeclarations)"),
+        ("Method", "methods", "Methods"),
+        ("View", "views", "Views"),
+    )
+
+    def ns0_ids_class_hpp(self, ids: List[Tuple[int, str]], node_class: str, what: str) -> str:
+        out = [BANNER,
+               f"// Numeric NodeIds of the namespace-0 {what} (ns=0;i=<value>); see ns0_ids.hpp.\n"
+               "#pragma once\n\n#include <cstdint>\n\nnamespace pnp::ua::ns0 {\n\n"]
+        for num, name in ids:
+            if self.m.node_class[num] == node_class:
+                out.append(f"inline constexpr std::uint32_t {name} = {num};\n")
+        out.append("\n}  // namespace pnp::ua::ns0\n")
+        return "".join(out)
+
     def ns0_ids_hpp(self, ids: List[Tuple[int, str]]) -> str:
         out = [BANNER,
                "// Numeric NodeIds of namespace 0 (ns=0;i=<value>), named as in the official\n"
@@ -279,11 +302,16 @@ class Gen:
                "// (service DataTypes and their encodings). A name clash (none at generation\n"
                "// time) would keep the name for the lowest id and suffix the others with _<id>.\n"
                "// The values are std::uint32_t rather than UInt32 because ns0 has a node named\n"
-               "// UInt32 (ns0::UInt32 == 7).\n",
-               "#pragma once\n\n#include <cstdint>\n#include <optional>\n#include <string_view>\n\n"
-               "namespace pnp::ua::ns0 {\n\n"]
-        for num, name in ids:
-            out.append(f"inline constexpr std::uint32_t {name} = {num};\n")
+               "// UInt32 (ns0::UInt32 == 7).\n"
+               "//\n"
+               "// The ids are declared per NodeClass in ns0_ids_<class>.hpp (reference_types,\n"
+               "// data_types, object_types, variable_types, objects, variables, methods, views):\n"
+               "// include the one a file uses; this header includes them all (6,000+ names).\n",
+               "#pragma once\n\n#include <cstddef>\n#include <cstdint>\n#include <optional>\n"
+               "#include <string_view>\n\n"]
+        for _, file, _ in self.ID_CLASSES:
+            out.append(f"#include \"ua/types/ns0_ids_{file}.hpp\"\n")
+        out.append("\nnamespace pnp::ua::ns0 {\n")
         out.append(
             f"\ninline constexpr std::size_t kNodeIdCount = {len(ids)};\n"
             "// Symbolic name of ns=0;i=<id> (\"Server_ServerStatus\"); \"\" when unknown.\n"
@@ -324,13 +352,22 @@ class Gen:
             raise M.ModelError("too many node ids for a 16-bit index")
         return "".join(out)
 
-    # ---- ns0_types.hpp -------------------------------------------------------------------------
-    def types_hpp(self) -> str:
-        out = [BANNER, f"""// The structured DataTypes, enumerations, option sets and simple DataTypes of namespace 0
-// (Opc.Ua.NodeSet2.xml {self.m.nodeset_version}; the service DataTypes, which the 1.05 NodeSet2 no
-// longer contains, from Opc.Ua.Types.bsd), with their OPC UA Binary codecs.
-//
-// Conventions (see tools/codegen/README.md):
+    # ---- ns0_types*.hpp ------------------------------------------------------------------------
+    # The structures are declared per area of the specification (the Part that defines them),
+    # so that a file includes only the area it uses; ns0_types.hpp includes every area.
+    # (header suffix, Parts, what), in layers: an area also holds the structures of later
+    # Parts that its own contain (see assign_areas). A Part not listed, or unknown: "other".
+    AREAS = (
+        ("services", (), "the service messages: requests, responses and the structures in them "
+                         "(OPC 10000-4)"),
+        ("parameters", (4,), "the other service parameters: filters, notifications, identity "
+                             "tokens, node attributes, ... (OPC 10000-4)"),
+        ("model", (3, 5, 8), "the information model: address space, server information, "
+                             "data access (OPC 10000-3, -5, -8)"),
+        ("pubsub", (14,), "PubSub configuration and messages (OPC 10000-14)"),
+        ("other", (), "the other Parts (alarms, history, GDS, aggregates, ...)"),
+    )
+    TYPES_HEADER_DOC = """// Conventions (see tools/codegen/README.md):
 // * type name = the DataType's SymbolicName or BrowseName (ThreeDVector for "3DVector"); a name
 //   taken by the built-in types gets a suffix (ns0 IdType -> IdTypeEnum);
 // * field name = the definition's field name with the first letter lower-cased, '_' appended
@@ -345,21 +382,51 @@ class Gen:
 // * option sets over integers -> `using X = UInt32;` plus the single-bit masks in
 //   `namespace XBits` (AccessLevelTypeBits::CurrentRead == 0x1);
 // * simple DataTypes (subtypes of built-in types) -> `using Duration = Double;`.
-#pragma once
+"""
 
-#include <cstddef>
-#include <optional>
-#include <span>
-#include <string>
+    @staticmethod
+    def is_service_message(dt: M.DataType) -> bool:
+        return dt.part == 4 and (dt.cpp_name.endswith(("Request", "Response")) or
+                                 dt.cpp_name == "ServiceFault")
+
+    def assign_areas(self) -> None:
+        """Each structure goes to the first area (in AREAS order) whose Parts define it or a
+        structure that contains it by value, so that an area's header needs only the areas
+        before it."""
+        self.area: Dict[int, str] = {}
+        by_id = {d.id: d for d in self.structs}
+        for name, parts, _ in self.AREAS:
+            if name == "services":
+                roots = [d for d in self.structs if self.is_service_message(d)]
+            else:
+                roots = [d for d in self.structs if not parts or d.part in parts]
+            stack = [d for d in roots if d.id not in self.area]
+            while stack:
+                d = stack.pop()
+                if d.id in self.area:
+                    continue
+                self.area[d.id] = name
+                stack.extend(by_id[fi.struct_dep] for fi in self.fields[d.id] if fi.struct_dep)
+        self.area_deps: Dict[str, set] = {a: set() for a, _, _ in self.AREAS}
+        for d in self.structs:
+            for fi in self.fields[d.id]:
+                if fi.struct_dep and self.area[fi.struct_dep] != self.area[d.id]:
+                    self.area_deps[self.area[d.id]].add(self.area[fi.struct_dep])
+
+    def enums_hpp(self) -> str:
+        out = [BANNER, f"""// The enumerations, option sets and simple DataTypes of namespace 0
+// (Opc.Ua.NodeSet2.xml {self.m.nodeset_version} and Opc.Ua.Types.bsd), with their OPC UA Binary codecs.
+// The structures are in ns0_types_<area>.hpp (ns0_types.hpp: all of them).
+//
+""", self.TYPES_HEADER_DOC, """#pragma once
+
 #include <string_view>
-#include <variant>
-#include <vector>
 
 #include "ua/types/binary.hpp"
 #include "ua/types/builtin.hpp"
 #include "ua/types/extension_object.hpp"
 
-namespace pnp::ua {{
+namespace pnp::ua {
 
 """]
         out.append("// ---- simple DataTypes -------------------------------------------------------------\n")
@@ -389,9 +456,47 @@ namespace pnp::ua {{
             out.append(f"std::string_view toString({dt.cpp_name} v);  // \"\" for unknown values\n")
             out.append(f"inline void encode(BinaryEncoder& e, {dt.cpp_name} v) {{ e.number<Int32>(static_cast<Int32>(v)); }}\n")
             out.append(f"inline void decode(BinaryDecoder& d, {dt.cpp_name}& v) {{ v = static_cast<{dt.cpp_name}>(d.number<Int32>()); }}\n\n")
-        out.append("// ---- structures (ordered so that every member type is complete) ------------------\n")
-        for dt in self.structs:
+        out.append("}  // namespace pnp::ua\n")
+        return "".join(out)
+
+    def area_hpp(self, area: str) -> str:
+        what = next(w for a, _, w in self.AREAS if a == area)
+        structs = [dt for dt in self.structs if self.area[dt.id] == area]
+        out = [BANNER, f"// The structured DataTypes of namespace 0 of {what}, with their OPC UA Binary\n"
+               "// codecs (declared here, defined in ns0_types_<k>.cpp); conventions: ns0_enums.hpp.\n"
+               f"// {len(structs)} structures.\n"
+               "#pragma once\n\n#include <optional>\n#include <string>\n#include <string_view>\n"
+               "#include <variant>\n#include <vector>\n\n#include \"ua/types/ns0_enums.hpp\"\n"]
+        for dep in sorted(self.area_deps[area]):
+            out.append(f"#include \"ua/types/ns0_types_{dep}.hpp\"\n")
+        out.append("\nnamespace pnp::ua {\n\n")
+        for dt in structs:
             out.append(self.struct_decl(dt))
+        out.append("}  // namespace pnp::ua\n")
+        return "".join(out)
+
+    def types_hpp(self) -> str:
+        out = [BANNER, f"""// The structured DataTypes, enumerations, option sets and simple DataTypes of namespace 0
+// (Opc.Ua.NodeSet2.xml {self.m.nodeset_version}; the service DataTypes, which the 1.05 NodeSet2 no
+// longer contains, from Opc.Ua.Types.bsd), with their OPC UA Binary codecs, and the registry of
+// their codecs.
+//
+// This header includes every area; a file that needs one area includes only it:
+""" + "".join(f"//   ua/types/ns0_types_{a}.hpp: {w}\n" for a, _, w in self.AREAS) +
+"""//   ua/types/ns0_enums.hpp: enumerations, option sets, simple DataTypes (conventions there)
+#pragma once
+
+#include <cstddef>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "ua/types/ns0_enums.hpp"
+""" + "".join(f"#include \"ua/types/ns0_types_{a}.hpp\"\n" for a, _, _ in self.AREAS) + """
+namespace pnp::ua {
+
+"""]
         out.append(REGISTRY_DECL)
         out.append(f"inline constexpr std::size_t kDataTypeCodecCount = {len(self.structs)};\n\n")
         out.append("}  // namespace pnp::ua\n")
@@ -816,7 +921,17 @@ def main() -> int:
         w.write(os.path.join(inc, "status_codes.hpp"), g.status_codes_hpp())
         w.write(os.path.join(inc, "status_code_table.inc"), g.status_code_table_inc())
         w.write(os.path.join(inc, "ns0_ids.hpp"), g.ns0_ids_hpp(ids))
+        unclassified = [name for num, name in ids if g.m.node_class.get(num) not in
+                        {c for c, _, _ in g.ID_CLASSES}]
+        if unclassified:
+            raise M.ModelError(f"node ids without a known NodeClass: {unclassified[:5]}")
+        for node_class, file, what in g.ID_CLASSES:
+            w.write(os.path.join(inc, f"ns0_ids_{file}.hpp"), g.ns0_ids_class_hpp(ids, node_class, what))
         w.write(os.path.join(args.out, "ns0_ids.cpp"), g.ns0_ids_cpp(ids))
+        g.assign_areas()
+        w.write(os.path.join(inc, "ns0_enums.hpp"), g.enums_hpp())
+        for area, _, _ in g.AREAS:
+            w.write(os.path.join(inc, f"ns0_types_{area}.hpp"), g.area_hpp(area))
         w.write(os.path.join(inc, "ns0_types.hpp"), g.types_hpp())
         w.write(os.path.join(inc, "detail", "ns0_json.hpp"), g.json_hpp())
         w.write(os.path.join(args.out, "ns0_json.cpp"), g.json_cpp())

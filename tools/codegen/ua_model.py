@@ -139,6 +139,9 @@ class DataType:
     is_option_set: bool = False
     encodings: Dict[str, int] = field(default_factory=dict)  # "Binary"/"Xml"/"Json" -> id
     description: str = ""
+    # The OPC UA Part that specifies it (from the NodeSet2's Documentation link); 4 for the
+    # service DataTypes of Opc.Ua.Types.bsd; None when unknown.
+    part: Optional[int] = None
     # Filled by Model.classify():
     kind: str = ""  # builtin | abstract | simple | enum | optionset | struct | union | skip
     cpp_name: str = ""
@@ -177,6 +180,9 @@ class Model:
         self.datatypes: Dict[int, DataType] = {}
         self.node_names: Dict[int, str] = {}  # ns0 id -> NodeIds.csv style symbol
         self.node_origin: Dict[int, str] = {}  # "nodeset" / "table"
+        # ns0 id -> NodeClass (Object, Variable, Method, ObjectType, VariableType, DataType,
+        # ReferenceType, View)
+        self.node_class: Dict[int, str] = {}
         self.status_codes: List[StatusCodeEntry] = []
         self.notes: List[str] = []  # human-readable remarks, emitted into the headers
         self.nodeset_version = ""
@@ -259,6 +265,7 @@ class Model:
             if not fixture:
                 self.node_names[num] = name_of(num)
                 self.node_origin[num] = "nodeset"
+                self.node_class[num] = nodes[num].tag.rsplit("}", 1)[-1].removeprefix("UA")
 
         # DataTypes.
         for num in order:
@@ -276,6 +283,9 @@ class Model:
                 source="fixture" if fixture else "nodeset",
                 description=(doc.text or "").strip() if doc is not None else "",
             )
+            link = el.find("u:Documentation", ns)
+            m = re.search(r"/Part(\d+)/", (link.text or "") if link is not None else "")
+            dt.part = int(m.group(1)) if m else None
             d = el.find("u:Definition", ns)
             if d is not None:
                 dt.has_definition = True
@@ -338,10 +348,19 @@ class Model:
                 mismatches += 1
                 warn(f"i={num}: NodeSet name {nm} differs from the NodeIds table {ids_to_names[num]}")
         added = 0
+        class_of_category = {f"{c}Ids": c for c in (
+            "Object", "Variable", "Method", "ObjectType", "VariableType", "DataType",
+            "ReferenceType", "View")}
         for num in sorted(ids_to_names):
             if num not in self.node_names:
                 self.node_names[num] = ids_to_names[num][0]
                 self.node_origin[num] = "table"
+                for cat, entries in by_category.items():
+                    if entries.get(ids_to_names[num][0]) == num and cat in class_of_category:
+                        self.node_class[num] = class_of_category[cat]
+                        break
+                else:
+                    raise ModelError(f"i={num} ({ids_to_names[num][0]}): no NodeClass in {path}")
                 added += 1
         self.notes.append(
             f"{added} node ids come from the NodeIds table only (not in the NodeSet2); "
@@ -403,6 +422,7 @@ class Model:
                 is_abstract=False,
                 source="bsd",
                 has_definition=True,
+                part=4,
                 description=(doc.text or "").strip() if doc is not None else "",
             )
             if tag == "EnumeratedType":
