@@ -23,6 +23,7 @@
 #include "ua/demo/demo.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
 
 int main(int argc, char** argv) {
     using namespace pnp::ua;

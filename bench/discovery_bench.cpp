@@ -9,9 +9,9 @@
 
 #include <algorithm>
 #include <chrono>
-#include <fstream>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -19,6 +19,8 @@
 #include "ua/server/server.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 using namespace pnp::ua;
 using Clock = std::chrono::steady_clock;
@@ -122,11 +124,11 @@ int main(int argc, char** argv) {
     row("FindServersOnNetwork (all)", fson);
     row("FindServers (all)", fs);
     row("FindServersOnNetwork (filter NA)", ff);
-    std::printf("memory of the %d registrations (server and client in this process): heap "
-                "+%.1f KiB (%.0f B each), VmRSS %ld -> %ld kB\n",
-                servers, static_cast<double>(heapAfter - heapBefore) / 1024.0,
-                servers ? static_cast<double>(heapAfter - heapBefore) / servers : 0.0, rssBefore,
-                rssAfter);
+    std::printf(
+        "memory of the %d registrations (server and client in this process): heap "
+        "+%.1f KiB (%.0f B each), VmRSS %ld -> %ld kB\n",
+        servers, static_cast<double>(heapAfter - heapBefore) / 1024.0,
+        servers ? static_cast<double>(heapAfter - heapBefore) / servers : 0.0, rssBefore, rssAfter);
     c.disconnect();
     server.stop();
     return 0;

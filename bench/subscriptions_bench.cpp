@@ -32,6 +32,8 @@
 #include "ua/server/server.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 using namespace pnp::ua;
 using Clock = std::chrono::steady_clock;

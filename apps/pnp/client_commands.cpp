@@ -17,6 +17,7 @@
 #include "ua/client/subscription.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types.hpp"  // the codec registry
 #include "ua/types/status_codes.hpp"
 #include "value_text.hpp"
 

@@ -9,6 +9,7 @@
 #include "commands.hpp"
 #include "output.hpp"
 #include "ua/client/error.hpp"
+#include "ua/types/ns0_types_model.hpp"
 #include "value_text.hpp"
 
 namespace pnp::cli {

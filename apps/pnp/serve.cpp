@@ -17,6 +17,7 @@
 #include "ua/demo/demo.hpp"
 #include "ua/server/nodeset_xml.hpp"
 #include "ua/server/server.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
 
 namespace pnp::cli {
 

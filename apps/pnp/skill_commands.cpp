@@ -16,6 +16,7 @@
 #include "output.hpp"
 #include "skill/client/generic_client.hpp"
 #include "skill/detector/skill_detector.hpp"
+#include "ua/types/ns0_enums.hpp"
 #include "value_text.hpp"
 
 namespace pnp::cli {

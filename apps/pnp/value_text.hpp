@@ -50,7 +50,7 @@
 #include <utility>
 
 #include "ua/types/builtin.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
 
 namespace pnp::cli {
 

@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::demo {

@@ -31,6 +31,7 @@
 #include "support/child_process.hpp"
 #include "support/netns.hpp"
 #include "ua/client/client.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 #ifndef PNP_BINARY
 #error "PNP_BINARY must be defined"

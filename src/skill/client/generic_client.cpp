@@ -6,8 +6,8 @@
 #include <sstream>
 
 #include "ua/types/extension_object.hpp"
-#include "ua/types/ns0_ids.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_types_model.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::skill::client {

@@ -4,7 +4,10 @@
 #include <map>
 #include <thread>
 
-#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::skill::client {

@@ -1,6 +1,7 @@
 #include "skill/client/typed_clients.hpp"
 
 #include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_types_model.hpp"
 
 namespace pnp::skill::client {
 

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "skill/client/skill_client.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_model.hpp"
 
 namespace pnp::skill::client {
 

@@ -7,7 +7,10 @@
 #include <utility>
 
 #include "ua/client/client.hpp"
-#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_ids_variables.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::skill::detector {
 

@@ -36,6 +36,7 @@
 #include "mdns/mdns.hpp"
 #include "skill/model/model.hpp"
 #include "ua/discovery/watcher.hpp"
+#include "ua/types/ns0_enums.hpp"
 
 namespace pnp::skill::detector {
 

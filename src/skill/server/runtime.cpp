@@ -2,7 +2,7 @@
 // and the only path to transitions, the program state machine.
 #include "skill/server/runtime.hpp"
 
-#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::skill::server {

@@ -45,7 +45,6 @@
 
 #include "skill/model/model.hpp"
 #include "ua/types/extension_object.hpp"
-#include "ua/types/ns0_types.hpp"
 
 namespace pnp::skill::server {
 

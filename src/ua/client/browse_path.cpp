@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "ua/client/error.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::client {

@@ -15,7 +15,7 @@
 #include <functional>
 #include <string_view>
 
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::client {
 

@@ -18,7 +18,9 @@
 
 #include "ua/client/browse_path.hpp"
 #include "ua/client/subscription_engine.hpp"
-#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_ids_variables.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::client {

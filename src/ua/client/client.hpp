@@ -85,7 +85,7 @@
 #include "ua/client/error.hpp"
 #include "ua/client/services.hpp"
 #include "ua/transport/client_connection.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::client {
 

@@ -2,6 +2,7 @@
 
 #include <string>
 
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::client {

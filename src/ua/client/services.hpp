@@ -13,7 +13,7 @@
 #include "ua/types/attribute_id.hpp"
 #include "ua/types/binary.hpp"
 #include "ua/types/extension_object.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::client {
 

@@ -4,6 +4,8 @@
 
 #include "ua/client/subscription_engine.hpp"
 #include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::client {

@@ -36,6 +36,8 @@
 #include <vector>
 
 #include "ua/client/client.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::client {
 

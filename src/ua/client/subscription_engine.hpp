@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "ua/client/subscription.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::client {
 

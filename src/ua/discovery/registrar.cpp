@@ -7,6 +7,8 @@
 #include "ua/discovery/txt_record.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::discovery {
 

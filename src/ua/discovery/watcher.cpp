@@ -6,6 +6,7 @@
 #include "ua/client/client.hpp"
 #include "ua/discovery/txt_record.hpp"
 #include "ua/transport/client_connection.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::discovery {
 

@@ -25,7 +25,7 @@
 
 #include "mdns/mdns.hpp"
 #include "ua/discovery/browsing_worker.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::discovery {
 

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server {
 

@@ -52,8 +52,13 @@
 
 #include "ua/server/node.hpp"
 #include "ua/server/numeric_range.hpp"
-#include "ua/types/ns0_ids.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_ids_variable_types.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server {
 

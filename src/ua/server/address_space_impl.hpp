@@ -14,6 +14,9 @@
 
 #include "ua/server/address_space.hpp"
 #include "ua/server/node.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::server {

@@ -7,6 +7,8 @@
 #include <limits>
 
 #include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::server {

@@ -27,7 +27,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server {
 

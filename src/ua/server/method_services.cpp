@@ -5,6 +5,9 @@
 #include <optional>
 
 #include "ua/server/address_space_impl.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server {
 

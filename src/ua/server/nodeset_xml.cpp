@@ -17,6 +17,8 @@
 #include "ua/server/address_space_impl.hpp"
 #include "ua/server/structure_codec.hpp"
 #include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
 
 #ifndef PNP_NODESET_DIR_DEFAULT
 #define PNP_NODESET_DIR_DEFAULT ""

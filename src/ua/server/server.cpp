@@ -6,7 +6,9 @@
 #include <random>
 
 #include "ua/types/extension_object.hpp"
-#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_ids_variables.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::server {

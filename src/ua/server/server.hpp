@@ -24,7 +24,7 @@
 #include "ua/server/discovery.hpp"
 #include "ua/server/subscriptions.hpp"
 #include "ua/transport/tcp_server.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server {
 

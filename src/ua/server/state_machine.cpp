@@ -4,6 +4,11 @@
 #include <mutex>
 #include <utility>
 
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::server {

@@ -64,7 +64,6 @@
 
 #include "ua/server/address_space.hpp"
 #include "ua/server/server.hpp"
-#include "ua/types/ns0_ids.hpp"
 
 namespace pnp::ua::server {
 

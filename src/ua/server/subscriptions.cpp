@@ -12,7 +12,13 @@
 
 #include "ua/types/attribute_id.hpp"
 #include "ua/types/extension_object.hpp"
-#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::server {

@@ -29,7 +29,8 @@
 #include "ua/server/access_control.hpp"
 #include "ua/server/address_space.hpp"
 #include "ua/transport/tcp_server.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server {
 

@@ -2,6 +2,7 @@
 #include <algorithm>
 
 #include "ua/server/address_space_impl.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server {
 

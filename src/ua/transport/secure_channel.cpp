@@ -4,7 +4,7 @@
 #include <cstring>
 
 #include "ua/types/extension_object.hpp"
-#include "ua/types/ns0_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::transport {

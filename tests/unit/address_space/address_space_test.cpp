@@ -6,6 +6,14 @@
 #include <thread>
 
 #include "test_util.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_ids_variable_types.hpp"
+#include "ua/types/ns0_ids_variables.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server::test {
 namespace {

@@ -1,5 +1,12 @@
 // Browse, BrowseNext and TranslateBrowsePathsToNodeIds (OPC 10000-4 §5.8).
 #include "test_util.hpp"
+#include "ua/types/ns0_ids_methods.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_ids_variable_types.hpp"
+#include "ua/types/ns0_ids_variables.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server::test {
 namespace {

@@ -9,6 +9,9 @@
 #include <string>
 
 #include "ua/server/address_space.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_variables.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace {
 

@@ -2,6 +2,8 @@
 #include <thread>
 
 #include "test_util.hpp"
+#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types.hpp"
 
 namespace pnp::ua::server::test {
 namespace {

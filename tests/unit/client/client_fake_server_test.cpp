@@ -12,6 +12,8 @@
 #include "fake_server.hpp"
 #include "support/loopback.hpp"
 #include "ua/client/client.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::client {

@@ -19,6 +19,8 @@
 #include "ua/client/browse_path.hpp"
 #include "ua/client/client.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 #ifndef PNP_SOURCE_DIR

@@ -23,6 +23,7 @@
 #include "ua/client/client.hpp"
 #include "ua/client/subscription.hpp"
 #include "ua/client/subscription_engine.hpp"
+#include "ua/types/ns0_enums.hpp"
 #include "ua/types/status_codes.hpp"
 
 #ifndef PNP_SOURCE_DIR

@@ -4,6 +4,11 @@
 #include <gtest/gtest.h>
 
 #include "ua/server/nodeset_xml.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_ids_variable_types.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::server {

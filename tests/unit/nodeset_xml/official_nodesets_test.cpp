@@ -12,6 +12,7 @@
 
 #include "ua/server/nodeset_xml.hpp"
 #include "ua/types/binary.hpp"
+#include "ua/types/ns0_ids_variables.hpp"
 #include "ua/types/ns0_types.hpp"
 
 namespace pnp::ua::server {

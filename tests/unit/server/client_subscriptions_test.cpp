@@ -19,6 +19,7 @@
 #include "ua/client/subscription.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
 
 using namespace pnp::ua;
 using namespace std::chrono_literals;

@@ -18,6 +18,9 @@
 #include "ua/client/client.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua {

@@ -25,6 +25,7 @@
 #include "ua/client/subscription.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 using namespace pnp::ua;

@@ -16,6 +16,9 @@
 #include "ua/server/server.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 using namespace pnp::ua;

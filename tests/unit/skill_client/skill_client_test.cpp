@@ -25,6 +25,7 @@
 #include "ua/client/client.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_model.hpp"
 #include "ua/types/status_codes.hpp"
 
 using namespace pnp;

@@ -15,6 +15,7 @@
 #include "skill/server/controller.hpp"
 #include "support/loopback_server.hpp"
 #include "ua/server/server.hpp"
+#include "ua/types/ns0_enums.hpp"
 
 using namespace pnp;
 using namespace pnp::skill;

@@ -24,6 +24,7 @@
 #include "ua/server/nodeset_xml.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
 
 using namespace pnp;
 using namespace pnp::skill;

@@ -10,6 +10,13 @@
 #include <vector>
 
 #include "ua/server/nodeset_xml.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_ids_variable_types.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_services.hpp"
 
 namespace pnp::ua::server {
 namespace {

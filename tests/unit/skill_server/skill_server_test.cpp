@@ -16,6 +16,7 @@
 #include "ua/client/client.hpp"
 #include "ua/client/subscription.hpp"
 #include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_types_services.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::skill {

@@ -24,7 +24,12 @@
 #include "bench/driver/driver.hpp"
 #include "ua/client/client.hpp"
 #include "ua/server/server.hpp"
-#include "ua/types/ns0_ids.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
+#include "ua/types/ns0_ids_object_types.hpp"
+#include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/ns0_ids_reference_types.hpp"
+#include "ua/types/ns0_types_model.hpp"
+#include "ua/types/ns0_types_parameters.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::bench::opcua {
