@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # Configure (CMake + Ninja) and build.
 #
+#   scripts/build.sh [MODE] [TARGET...]   builds TARGETs only (default: everything of MODE);
+#                                         e.g. `scripts/build.sh release pnp` (scripts/run.sh)
+#
 #   scripts/build.sh [release]  -> build/       RelWithDebInfo, g++
 #   scripts/build.sh asan       -> build-asan/  Debug, -DPNP_SANITIZE=ON (ASan + UBSan), g++
 #   scripts/build.sh fuzz       -> build-fuzz/  clang >= 16, -DPNP_FUZZ=ON -DPNP_SANITIZE=ON,
@@ -16,6 +19,8 @@
 #                                compiler the project's -Werror warnings are tuned for)
 #   PNP_BUILD_JOBS=N             parallel jobs (default: nproc)
 #   PNP_CMAKE_ARGS="..."         extra arguments for the configure step
+#   PNP_CCACHE=auto|off          auto (default): compile through ccache when it is installed
+#                                (repeated builds on one machine; never required)
 #
 # clang 14 (Debian's default clang) is never picked: it cannot compile libstdc++-12's
 # <ranges> views. scripts/setup.sh installs clang-19 + libclang-rt-19-dev.
@@ -23,6 +28,7 @@ set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 MODE="${1:-release}"
+shift || true
 JOBS="${PNP_BUILD_JOBS:-$(nproc)}"
 log() { printf '[build] %s\n' "$*"; }
 
@@ -96,6 +102,15 @@ fi
 
 # shellcheck disable=SC2206
 EXTRA=(${PNP_CMAKE_ARGS:-})
+# Not for pgo: its objects depend on profiles outside the compiler's command line.
+if [[ "${PNP_CCACHE:-auto}" != off && "$MODE" != pgo ]] && command -v ccache >/dev/null 2>&1; then
+    ARGS+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+else
+    ARGS+=(-UCMAKE_CXX_COMPILER_LAUNCHER)
+fi
+if (($# > 0)); then
+    TARGET=(--target "$@")
+fi
 
 # Profile-guided: pnp is built instrumented, trained, and everything is built again with the
 # profile, in the same tree (GCC checks a profile against the source file's path, and the
@@ -120,7 +135,7 @@ fi
 log "configure $MODE -> ${DIR#"$ROOT"/} ${CXX_PATH:+(CXX=$CXX_PATH)}"
 cmake -S "$ROOT" -B "$DIR" "${ARGS[@]}" "${EXTRA[@]}"
 log "build $MODE (-j$JOBS)"
-if [[ ${#TARGET[@]} -gt 0 ]] && [[ ! -f "$ROOT/fuzz/CMakeLists.txt" ]]; then
+if [[ "$MODE" == fuzz ]] && [[ ! -f "$ROOT/fuzz/CMakeLists.txt" ]]; then
     log "no fuzz/CMakeLists.txt: nothing to build"
     exit 0
 fi
