@@ -105,6 +105,9 @@ EXTRA=(${PNP_CMAKE_ARGS:-})
 # Not for pgo: its objects depend on profiles outside the compiler's command line.
 if [[ "${PNP_CCACHE:-auto}" != off && "$MODE" != pgo ]] && command -v ccache >/dev/null 2>&1; then
     ARGS+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+    # Paths below the checkout hashed relative to it: another clone on the same machine (CI's)
+    # hits the same cache entries.
+    export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$ROOT}" CCACHE_NOHASHDIR="${CCACHE_NOHASHDIR:-1}"
 else
     ARGS+=(-UCMAKE_CXX_COMPILER_LAUNCHER)
 fi

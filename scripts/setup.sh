@@ -18,6 +18,8 @@ log() { printf '[setup] %s\n' "$*"; }
 PACKAGES=(
     # toolchain
     build-essential g++ cmake ninja-build pkg-config git python3
+    # repeated builds on one machine (scripts/build.sh uses it when present; never required)
+    ccache
     # clang 14 (Debian default) + its sanitizer/libFuzzer runtime, LLVM tools
     # (llvm-symbolizer for sanitizer stack traces)
     clang libclang-rt-14-dev llvm
