@@ -11,6 +11,7 @@
 
 #include "fake_server.hpp"
 #include "support/loopback.hpp"
+#include "support/wait.hpp"
 #include "ua/client/client.hpp"
 #include "ua/types/ns0_types_parameters.hpp"
 #include "ua/types/ns0_types_services.hpp"
@@ -23,15 +24,7 @@ using namespace std::chrono_literals;
 using pnp::testing::errorOf;
 using testing::FakeServer;
 
-template <class Pred>
-bool waitUntil(Pred pred, std::chrono::milliseconds timeout = 3000ms) {
-    auto end = Clock::now() + timeout;
-    while (Clock::now() < end) {
-        if (pred()) return true;
-        std::this_thread::sleep_for(5ms);
-    }
-    return pred();
-}
+using pnp::testing::waitUntil;
 
 const NodeId kInt32(1, "Int32");
 

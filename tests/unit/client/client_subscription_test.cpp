@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "fake_server.hpp"
+#include "support/wait.hpp"
 #include "ua/client/client.hpp"
 #include "ua/client/subscription.hpp"
 #include "ua/client/subscription_engine.hpp"
@@ -24,15 +25,7 @@ using testing::FakeServer;
 
 constexpr UInt32 kSubscriptionId = 7;
 
-template <class Pred>
-bool waitUntil(Pred pred, std::chrono::milliseconds timeout = 3000ms) {
-    auto end = Clock::now() + timeout;
-    while (Clock::now() < end) {
-        if (pred()) return true;
-        std::this_thread::sleep_for(5ms);
-    }
-    return pred();
-}
+using pnp::testing::waitUntil;
 
 // Subscription services of the FakeServer; Publish requests are queued for the test.
 class Scripted {

@@ -7,27 +7,14 @@
 #include <numeric>
 #include <random>
 
+#include "transport_test_util.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::transport {
 namespace {
 
-template <class F>
-StatusCode statusOf(F&& f) {
-    try {
-        f();
-    } catch (const TransportError& e) {
-        return e.status();
-    }
-    return StatusCode{};
-}
-
-Buffer pattern(std::size_t n, unsigned seed = 1) {
-    Buffer b(n);
-    std::mt19937 rng(seed);
-    for (auto& x : b) x = static_cast<Byte>(rng());
-    return b;
-}
+using test_util::pattern;
+using test_util::statusOf;
 
 // A MSG message buffer holding `body`.
 Buffer message(const Buffer& body) {

@@ -8,6 +8,7 @@
 #include <functional>
 #include <random>
 
+#include "transport_test_util.hpp"
 #include "ua/types/extension_object.hpp"
 #include "ua/types/ns0_types.hpp"
 #include "ua/types/status_codes.hpp"
@@ -15,17 +16,12 @@
 namespace pnp::ua::transport {
 namespace {
 
+using test_util::pattern;
+
 using namespace std::chrono_literals;
 
 const NodeId kEchoRequest(1, 1001);
 const NodeId kEchoResponse(1, 1002);
-
-Buffer pattern(std::size_t n, unsigned seed = 1) {
-    Buffer b(n);
-    std::mt19937 rng(seed);
-    for (auto& x : b) x = static_cast<Byte>(rng());
-    return b;
-}
 
 Buffer request(const NodeId& type, const Buffer& body) {
     Buffer m = newMessageBuffer();

@@ -3,21 +3,14 @@
 
 #include <gtest/gtest.h>
 
+#include "transport_test_util.hpp"
 #include "ua/transport/client_connection.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::ua::transport {
 namespace {
 
-template <class F>
-StatusCode statusOf(F&& f) {
-    try {
-        f();
-    } catch (const TransportError& e) {
-        return e.status();
-    }
-    return StatusCode{};
-}
+using test_util::statusOf;
 
 Byte b(char c) { return static_cast<Byte>(c); }
 

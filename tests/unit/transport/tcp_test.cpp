@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "support/raw_socket.hpp"
+#include "transport_test_util.hpp"
 #include "ua/transport/client_connection.hpp"
 #include "ua/transport/tcp_server.hpp"
 #include "ua/types/extension_object.hpp"
@@ -28,21 +29,16 @@
 namespace pnp::ua::transport {
 namespace {
 
+using test_util::pattern;
+
 using namespace std::chrono_literals;
 
 const NodeId kEcho(1, 1);  // respond with the same body
-const NodeId kEchoResponse(1, 2);
+const NodeId kEchoReply(1, 2);
 const NodeId kLater(1, 3);  // respond from another thread after 5 ms
 const NodeId kBig(1, 4);    // body: UInt32 handle, UInt32 n -> header + n bytes
 const NodeId kClose(1, 5);  // the server closes the connection
 const NodeId kFault(1, 6);  // ServiceFault BadNodeIdUnknown via sendServiceFault
-
-Buffer pattern(std::size_t n, unsigned seed = 1) {
-    Buffer b(n);
-    std::mt19937 rng(seed);
-    for (auto& x : b) x = static_cast<Byte>(rng());
-    return b;
-}
 
 Buffer requestMessage(const NodeId& type, const Buffer& body) {
     Buffer m = ClientConnection::newMessageBuffer();
@@ -65,7 +61,7 @@ class Handler : public ServiceHandler {
         if (r.typeId == kEcho) {
             Buffer m = ServerConnection::newMessageBuffer();
             BinaryEncoder e(m);
-            encode(e, kEchoResponse);
+            encode(e, kEchoReply);
             e.raw(r.body, r.size);
             c->send(r.requestId, std::move(m));
         } else if (r.typeId == kLater) {
@@ -75,7 +71,7 @@ class Handler : public ServiceHandler {
                 std::this_thread::sleep_for(5ms);
                 Buffer m = ServerConnection::newMessageBuffer();
                 BinaryEncoder e(m);
-                encode(e, kEchoResponse);
+                encode(e, kEchoReply);
                 e.raw(body.data(), body.size());
                 c->send(id, std::move(m));
             });
@@ -83,7 +79,7 @@ class Handler : public ServiceHandler {
             UInt32 handle = getUInt32(r.body), n = getUInt32(r.body + 4);
             Buffer m = ServerConnection::newMessageBuffer();
             BinaryEncoder e(m);
-            encode(e, kEchoResponse);
+            encode(e, kEchoReply);
             encode(e, DateTime::now());
             encode(e, handle);
             m.resize(m.size() + n, 0x5A);
@@ -207,7 +203,7 @@ class TcpTest : public ::testing::Test {
         ASSERT_TRUE(observer);
         Buffer body = pattern(64, 99);
         auto r = roundTrip(*observer, body);
-        EXPECT_EQ(r.typeId, kEchoResponse);
+        EXPECT_EQ(r.typeId, kEchoReply);
         EXPECT_EQ(r.body, body);
     }
     // Waits (bounded) until cond holds.
@@ -436,7 +432,7 @@ TEST_F(TcpTest, ResponseLargerThanClientAccepts) {
     // Within the limit it arrives.
     putUInt32(req.data() + 4, 60000);
     r = roundTrip(*c, req, kBig);
-    EXPECT_EQ(r.typeId, kEchoResponse);
+    EXPECT_EQ(r.typeId, kEchoReply);
     EXPECT_EQ(r.body.size(), 60000u + 12);
 }
 

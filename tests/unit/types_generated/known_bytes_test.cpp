@@ -4,23 +4,16 @@
 #include <string>
 #include <type_traits>
 
+#include "bytes.hpp"
 #include "ua/types/ns0_types.hpp"
 
 namespace pnp::ua {
 namespace {
 
-Buffer bytes(std::initializer_list<int> v) {
-    Buffer b;
-    for (int x : v) b.push_back(static_cast<Byte>(x));
-    return b;
-}
+using testgen::bytes;
+using testgen::decodeAll;
 
 void append(Buffer& b, const Buffer& more) { b.insert(b.end(), more.begin(), more.end()); }
-
-template <class T>
-T decodeAll(const Buffer& b) {
-    return decodeFromBuffer<T>(b.data(), b.size());
-}
 
 // ReadValueId{ns=0;i=2258 (Server_ServerStatus_CurrentTime), Value attribute}.
 const Buffer kReadValueId = bytes({

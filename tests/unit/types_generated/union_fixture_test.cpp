@@ -5,22 +5,15 @@
 
 #include <type_traits>
 
+#include "bytes.hpp"
 #include "ns0_test_fixture.hpp"
 #include "roundtrip_check.hpp"
 
 namespace pnp::ua {
 namespace {
 
-Buffer bytes(std::initializer_list<int> v) {
-    Buffer b;
-    for (int x : v) b.push_back(static_cast<Byte>(x));
-    return b;
-}
-
-template <class T>
-T decodeAll(const Buffer& b) {
-    return decodeFromBuffer<T>(b.data(), b.size());
-}
+using testgen::bytes;
+using testgen::decodeAll;
 
 TEST(GeneratedUnion, SwitchFieldIsTheVariantIndex) {
     static_assert(PnpTestUnion::kNumber == 1 && PnpTestUnion::kText == 2 &&
