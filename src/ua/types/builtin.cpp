@@ -384,30 +384,7 @@ Variant::Variant(const char* s) : data_(String(s)) {}
         data_.template emplace<std::vector<T>>(std::move(v)); \
         dims_.clear();                                        \
     }
-PNP_UA_VARIANT_ASSIGN(Boolean)
-PNP_UA_VARIANT_ASSIGN(SByte)
-PNP_UA_VARIANT_ASSIGN(Byte)
-PNP_UA_VARIANT_ASSIGN(Int16)
-PNP_UA_VARIANT_ASSIGN(UInt16)
-PNP_UA_VARIANT_ASSIGN(Int32)
-PNP_UA_VARIANT_ASSIGN(UInt32)
-PNP_UA_VARIANT_ASSIGN(Int64)
-PNP_UA_VARIANT_ASSIGN(UInt64)
-PNP_UA_VARIANT_ASSIGN(Float)
-PNP_UA_VARIANT_ASSIGN(Double)
-PNP_UA_VARIANT_ASSIGN(String)
-PNP_UA_VARIANT_ASSIGN(DateTime)
-PNP_UA_VARIANT_ASSIGN(Guid)
-PNP_UA_VARIANT_ASSIGN(ByteString)
-PNP_UA_VARIANT_ASSIGN(XmlElement)
-PNP_UA_VARIANT_ASSIGN(NodeId)
-PNP_UA_VARIANT_ASSIGN(ExpandedNodeId)
-PNP_UA_VARIANT_ASSIGN(StatusCode)
-PNP_UA_VARIANT_ASSIGN(QualifiedName)
-PNP_UA_VARIANT_ASSIGN(LocalizedText)
-PNP_UA_VARIANT_ASSIGN(ExtensionObject)
-PNP_UA_VARIANT_ASSIGN(DataValue)
-PNP_UA_VARIANT_ASSIGN(DiagnosticInfo)
+PNP_UA_FOR_EACH_SCALAR_TYPE(PNP_UA_VARIANT_ASSIGN)
 #undef PNP_UA_VARIANT_ASSIGN
 void Variant::assignArray(std::vector<Variant>&& v) {
     data_.template emplace<std::vector<Variant>>(std::move(v));

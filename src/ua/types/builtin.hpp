@@ -345,6 +345,34 @@ using VariantStorage =
                  std::vector<DiagnosticInfo>>;
 }  // namespace detail
 
+// X(T) for every built-in type a Variant holds as a scalar (all but Variant), T being both the
+// C++ type and its BuiltinType name.
+#define PNP_UA_FOR_EACH_SCALAR_TYPE(X) \
+    X(Boolean)                         \
+    X(SByte)                           \
+    X(Byte)                            \
+    X(Int16)                           \
+    X(UInt16)                          \
+    X(Int32)                           \
+    X(UInt32)                          \
+    X(Int64)                           \
+    X(UInt64)                          \
+    X(Float)                           \
+    X(Double)                          \
+    X(String)                          \
+    X(DateTime)                        \
+    X(Guid)                            \
+    X(ByteString)                      \
+    X(XmlElement)                      \
+    X(NodeId)                          \
+    X(ExpandedNodeId)                  \
+    X(StatusCode)                      \
+    X(QualifiedName)                   \
+    X(LocalizedText)                   \
+    X(ExtensionObject)                 \
+    X(DataValue)                       \
+    X(DiagnosticInfo)
+
 // The C++ type that holds a scalar of a built-in type in a Variant.
 template <class T>
 struct BuiltinTypeOf;
@@ -353,31 +381,10 @@ struct BuiltinTypeOf;
     struct BuiltinTypeOf<T> {                                 \
         static constexpr BuiltinType value = BuiltinType::id; \
     }
-PNP_UA_BUILTIN_OF(Boolean, Boolean);
-PNP_UA_BUILTIN_OF(SByte, SByte);
-PNP_UA_BUILTIN_OF(Byte, Byte);
-PNP_UA_BUILTIN_OF(Int16, Int16);
-PNP_UA_BUILTIN_OF(UInt16, UInt16);
-PNP_UA_BUILTIN_OF(Int32, Int32);
-PNP_UA_BUILTIN_OF(UInt32, UInt32);
-PNP_UA_BUILTIN_OF(Int64, Int64);
-PNP_UA_BUILTIN_OF(UInt64, UInt64);
-PNP_UA_BUILTIN_OF(Float, Float);
-PNP_UA_BUILTIN_OF(Double, Double);
-PNP_UA_BUILTIN_OF(String, String);
-PNP_UA_BUILTIN_OF(DateTime, DateTime);
-PNP_UA_BUILTIN_OF(Guid, Guid);
-PNP_UA_BUILTIN_OF(ByteString, ByteString);
-PNP_UA_BUILTIN_OF(XmlElement, XmlElement);
-PNP_UA_BUILTIN_OF(NodeId, NodeId);
-PNP_UA_BUILTIN_OF(ExpandedNodeId, ExpandedNodeId);
-PNP_UA_BUILTIN_OF(StatusCode, StatusCode);
-PNP_UA_BUILTIN_OF(QualifiedName, QualifiedName);
-PNP_UA_BUILTIN_OF(LocalizedText, LocalizedText);
-PNP_UA_BUILTIN_OF(ExtensionObject, ExtensionObject);
-PNP_UA_BUILTIN_OF(DataValue, DataValue);
+#define PNP_UA_BUILTIN_OF_SAME(T) PNP_UA_BUILTIN_OF(T, T);
+PNP_UA_FOR_EACH_SCALAR_TYPE(PNP_UA_BUILTIN_OF_SAME)
+#undef PNP_UA_BUILTIN_OF_SAME
 PNP_UA_BUILTIN_OF(Variant, Variant);
-PNP_UA_BUILTIN_OF(DiagnosticInfo, DiagnosticInfo);
 #undef PNP_UA_BUILTIN_OF
 
 // A scalar, a one-dimensional array or a matrix (array + dimensions) of one built-in type.
@@ -436,7 +443,7 @@ class Variant {
         using U = std::decay_t<T>;
         static_assert(!std::is_same_v<U, Variant>, "a Variant cannot hold a scalar Variant");
         static_assert(BuiltinTypeOf<U>::value != BuiltinType::Null, "not a built-in type");
-        if constexpr (std::is_same_v<std::remove_cvref_t<T>, U> && !std::is_lvalue_reference_v<T>)
+        if constexpr (std::is_same_v<T, U>)  // a non-const rvalue
             assignScalar(std::move(v));
         else
             assignScalar(U(v));  // a copy, moved in
@@ -470,31 +477,8 @@ class Variant {
     // the class comment). Each replaces the value and clears the dimensions.
 #define PNP_UA_VARIANT_ASSIGN(T) \
     void assignScalar(T&& v);    \
-    void assignArray(std::vector<T>&& v)
-    PNP_UA_VARIANT_ASSIGN(Boolean);
-    PNP_UA_VARIANT_ASSIGN(SByte);
-    PNP_UA_VARIANT_ASSIGN(Byte);
-    PNP_UA_VARIANT_ASSIGN(Int16);
-    PNP_UA_VARIANT_ASSIGN(UInt16);
-    PNP_UA_VARIANT_ASSIGN(Int32);
-    PNP_UA_VARIANT_ASSIGN(UInt32);
-    PNP_UA_VARIANT_ASSIGN(Int64);
-    PNP_UA_VARIANT_ASSIGN(UInt64);
-    PNP_UA_VARIANT_ASSIGN(Float);
-    PNP_UA_VARIANT_ASSIGN(Double);
-    PNP_UA_VARIANT_ASSIGN(String);
-    PNP_UA_VARIANT_ASSIGN(DateTime);
-    PNP_UA_VARIANT_ASSIGN(Guid);
-    PNP_UA_VARIANT_ASSIGN(ByteString);
-    PNP_UA_VARIANT_ASSIGN(XmlElement);
-    PNP_UA_VARIANT_ASSIGN(NodeId);
-    PNP_UA_VARIANT_ASSIGN(ExpandedNodeId);
-    PNP_UA_VARIANT_ASSIGN(StatusCode);
-    PNP_UA_VARIANT_ASSIGN(QualifiedName);
-    PNP_UA_VARIANT_ASSIGN(LocalizedText);
-    PNP_UA_VARIANT_ASSIGN(ExtensionObject);
-    PNP_UA_VARIANT_ASSIGN(DataValue);
-    PNP_UA_VARIANT_ASSIGN(DiagnosticInfo);
+    void assignArray(std::vector<T>&& v);
+    PNP_UA_FOR_EACH_SCALAR_TYPE(PNP_UA_VARIANT_ASSIGN)
 #undef PNP_UA_VARIANT_ASSIGN
     void assignArray(std::vector<Variant>&& v);
 
