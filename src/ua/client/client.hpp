@@ -349,7 +349,7 @@ Resp Client::request(Req req, Deadline deadline) {
 template <class Req, class Resp, class F>
 requires std::invocable<F&, Result<Resp>>
 void Client::requestAsync(Req req, F callback, Deadline deadline) {
-    constexpr std::string_view service = detail::serviceName<Req>();
+    static constexpr std::string_view service = detail::serviceName<Req>();
     sendAsync(encoderFor(req), deadline, service,
               [cb = std::move(callback),
                limits = decodeLimits()](Result<transport::IncomingResponse> r) mutable {

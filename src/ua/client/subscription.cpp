@@ -12,7 +12,6 @@ namespace pnp::ua::client {
 
 namespace {
 
-constexpr UInt32 kBaseEventType = 2041;
 constexpr UInt32 kMaxRepublishPerGap = 32;
 constexpr std::size_t kMaxMissing = 64;  // per subscription
 

@@ -30,7 +30,7 @@ using pnp::testing::waitUntil;
 // Subscription services of the FakeServer; Publish requests are queued for the test.
 class Scripted {
   public:
-    explicit Scripted(FakeServer& server) : server_(server) {
+    explicit Scripted(FakeServer& server) {
         server.setHook([this](const FakeServer::Request& r) { return handle(r); });
     }
 
@@ -155,7 +155,6 @@ class Scripted {
         return true;
     }
 
-    FakeServer& server_;
     std::mutex m_;
     std::condition_variable cv_;
     std::deque<FakeServer::Request> publishes_;

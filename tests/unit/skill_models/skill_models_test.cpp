@@ -256,9 +256,9 @@ TEST(SkillModels, InstantiatedSkillsHaveTheContractedStructure) {
         InstantiateOptions o;
         for (const auto& p : spec.params)
             if (p.optional) o.optionalChildren.push_back({m.ns(p.uri), p.name});
+        const std::string skillName = "Skill" + std::to_string(++n);
         const NodeId skill = m.space.instantiate(NodeId(0, ns0::ObjectsFolder), type,
-                                                 NodeId(1, "Skill" + std::to_string(++n)),
-                                                 {1, "Skill" + std::to_string(n)}, o);
+                                                 NodeId(1, skillName), {1, skillName}, o);
         auto td = forward(m.space, skill, ns0::HasTypeDefinition);
         ASSERT_EQ(td.size(), 1u);
         EXPECT_EQ(td[0].nodeId.nodeId, type);
