@@ -3,6 +3,7 @@
 #pragma once
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <cstdio>
@@ -20,6 +21,12 @@ struct ClientRun {
     std::vector<std::string> lines;  // stdout
     std::string log;                 // stderr
 };
+
+// The stderr log of one test process's child WHAT: ctest runs tests side by side, each in its
+// own process, so the path carries the process id.
+inline std::string testLog(const std::string& what) {
+    return "/tmp/test_mw_" + what + "_" + std::to_string(::getpid()) + ".log";
+}
 
 inline std::string quote(const std::string& s) {
     std::string q = "'";
@@ -74,12 +81,11 @@ inline ClientRun runSmallChain(const std::string& exe, const std::string& name, 
         if (!startReady(nodes[k],
                         {exe, "node", "--port", base, "--first", std::to_string(k * 6), "--count",
                          "6", "--streams", "3", "--hops", "4"},
-                        "/tmp/test_mw_" + name + "_node" + std::to_string(k) + ".log", readySeconds,
-                        error))
+                        testLog(name + "_node" + std::to_string(k)), readySeconds, error))
             return {};
     return runClient({exe, "client", "--mode", "chain", "--port", base, "--streams", "3", "--hops",
                       "4", "--runs", "10"},
-                     60, "/tmp/test_mw_" + name + "_chain.log");
+                     60, testLog(name + "_chain"));
 }
 
 }  // namespace pnp::testing

@@ -13,6 +13,7 @@
 
 using pnp::testing::ChildProcess;  // tests/support/child_process.hpp
 using pnp::testing::runClient;
+using pnp::testing::testLog;
 
 namespace {
 
@@ -23,9 +24,7 @@ std::string domainSetting(int k = 0) {
     return "domain=" + std::to_string((static_cast<int>(::getpid()) * 2 + k) % 233);
 }
 
-std::string logPath(const std::string& what) {
-    return "/tmp/test_mw_dds_" + what + "_" + std::to_string(::getpid()) + ".log";
-}
+std::string logPath(const std::string& what) { return testLog("dds_" + what); }
 
 void roundTrip(const std::string& variant, const std::string& mode) {
     const std::string domain = domainSetting();

@@ -15,6 +15,7 @@
 using pnp::testing::ChildProcess;
 using pnp::testing::ClientRun;
 using pnp::testing::runClient;
+using pnp::testing::testLog;
 
 namespace {
 
@@ -58,8 +59,7 @@ class Broker {
         std::ofstream(conf_) << "listener " << port_ << " 127.0.0.1\n"
                              << "allow_anonymous true\n"
                              << "set_tcp_nodelay true\n";
-        if (!process_.start({kMosquitto, "-c", conf_}, "/tmp/test_mw_mqtt_" + name + "_broker.log",
-                            err))
+        if (!process_.start({kMosquitto, "-c", conf_}, testLog("mqtt_" + name + "_broker"), err))
             return false;
         for (int i = 0; i < 200; ++i) {
             if (portAccepts(port_)) return true;
@@ -102,14 +102,14 @@ TEST_P(MiddlewareMqttRoundTrip, EveryPayloadSizeIntact) {
     ChildProcess server;
     ASSERT_TRUE(server.start(
         {kExe, "server", "--mode", mode, "--variant", variant, "--port", broker.port()},
-        "/tmp/test_mw_mqtt_" + name + "_server.log", err))
+        testLog("mqtt_" + name + "_server"), err))
         << err;
     ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(10), err))
         << err << server.logTail();
     auto r =
         runClient({kExe, "client", "--mode", mode, "--variant", variant, "--port", broker.port(),
                    "--reps", "20", "--warmup", "2", "--sizes", "0,2,1000,32768"},
-                  60, "/tmp/test_mw_mqtt_" + name + "_client.log");
+                  60, testLog("mqtt_" + name + "_client"));
     ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 4u);  // one summary per size; the driver checked every reply
     const char* sizes[] = {"0", "2", "1000", "32768"};
@@ -139,17 +139,17 @@ TEST_P(MiddlewareMqttChain, ThreeStreamsOfFourHopsThroughTwoNodeProcesses) {
     ASSERT_TRUE(broker.start("chain_" + variant, err)) << err;
     ChildProcess nodes[2];
     for (int k = 0; k < 2; ++k) {
-        ASSERT_TRUE(nodes[k].start(
-            {kExe, "node", "--variant", variant, "--port", broker.port(), "--first",
-             std::to_string(k * 6), "--count", "6", "--streams", "3", "--hops", "4"},
-            "/tmp/test_mw_mqtt_chain_" + variant + "_node" + std::to_string(k) + ".log", err))
+        ASSERT_TRUE(
+            nodes[k].start({kExe, "node", "--variant", variant, "--port", broker.port(), "--first",
+                            std::to_string(k * 6), "--count", "6", "--streams", "3", "--hops", "4"},
+                           testLog("mqtt_chain_" + variant + "_node" + std::to_string(k)), err))
             << err;
     }
     for (auto& n : nodes)
         ASSERT_TRUE(n.waitForLine("READY", std::chrono::seconds(20), err)) << err << n.logTail();
     auto r = runClient({kExe, "client", "--mode", "chain", "--variant", variant, "--port",
                         broker.port(), "--streams", "3", "--hops", "4", "--runs", "10"},
-                       60, "/tmp/test_mw_mqtt_chain_" + variant + ".log");
+                       60, testLog("mqtt_chain_" + variant));
     ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 1u);
     EXPECT_NE(r.lines[0].find("\"n\":10,"), std::string::npos) << r.lines[0];
@@ -173,7 +173,7 @@ TEST_P(MiddlewareMqttBrokerDeath, ClientAndServerFailWithAReason) {
     ChildProcess server;
     ASSERT_TRUE(server.start({kExe, "server", "--mode", "echo", "--variant", variant, "--port",
                               broker.port(), "--set", "receive=" + receive},
-                             "/tmp/test_mw_mqtt_" + name + "_server.log", err))
+                             testLog("mqtt_" + name + "_server"), err))
         << err;
     ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(10), err)) << err;
     ClientRun r;
@@ -182,7 +182,7 @@ TEST_P(MiddlewareMqttBrokerDeath, ClientAndServerFailWithAReason) {
         r = runClient(
             {kExe, "client", "--mode", "echo", "--variant", variant, "--port", broker.port(),
              "--sizes", "100", "--reps", "10000000", "--warmup", "0", "--timeout-ms", "3000"},
-            60, "/tmp/test_mw_mqtt_" + name + "_client.log");
+            60, testLog("mqtt_" + name + "_client"));
     });
     std::this_thread::sleep_for(std::chrono::milliseconds(1500));
     broker.kill9();
@@ -211,14 +211,14 @@ INSTANTIATE_TEST_SUITE_P(Variants, MiddlewareMqttBrokerDeath,
 TEST(MiddlewareMqtt, ClientWithoutBrokerFailsWithAReason) {
     const std::string port = std::to_string(pnp::testing::freeLoopbackPort());
     auto r = runClient({kExe, "client", "--port", port, "--timeout-ms", "1000"}, 30,
-                       "/tmp/test_mw_mqtt_nobroker.log");
+                       testLog("mqtt_nobroker"));
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.log.find("cannot connect to the MQTT broker"), std::string::npos) << r.log;
 }
 
 TEST(MiddlewareMqtt, WildcardTopicPrefixIsRefused) {
     auto r = runClient({kExe, "client", "--set", "topic-prefix=a/#", "--timeout-ms", "1000"}, 30,
-                       "/tmp/test_mw_mqtt_badprefix.log");
+                       testLog("mqtt_badprefix"));
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.log.find("topic-prefix"), std::string::npos) << r.log;
 }

@@ -8,6 +8,7 @@
 
 using pnp::testing::ChildProcess;
 using pnp::testing::runClient;
+using pnp::testing::testLog;
 
 namespace {
 
@@ -18,12 +19,12 @@ void roundTrip(const std::string& mode) {
     ChildProcess server;
     std::string err;
     ASSERT_TRUE(server.start({kExe, "server", "--mode", mode, "--port", port},
-                             "/tmp/test_mw_opcua_server.log", err))
+                             testLog("opcua_server"), err))
         << err;
     ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(20), err)) << err;
     auto r = runClient({kExe, "client", "--mode", mode, "--port", port, "--reps", "20", "--warmup",
                         "2", "--sizes", "0,1,2,1000,32768,65536,200000"},
-                       60, "/tmp/test_mw_opcua_client.log");
+                       60, testLog("opcua_client"));
     ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 7u);  // one summary per size
     EXPECT_NE(r.lines[4].find("\"payload\":32768"), std::string::npos) << r.lines[4];
@@ -50,7 +51,7 @@ TEST(MiddlewareOpcua, ClientWithoutServerFailsWithAReasonWithinItsTimeout) {
     const std::string port = std::to_string(pnp::testing::freeLoopbackPort());
     const auto t0 = std::chrono::steady_clock::now();
     auto r = runClient({kExe, "client", "--port", port, "--timeout-ms", "300"}, 30,
-                       "/tmp/test_mw_opcua_noserver.log");
+                       testLog("opcua_noserver"));
     const auto took = std::chrono::steady_clock::now() - t0;
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.log.find("connect opc.tcp://127.0.0.1:" + port), std::string::npos) << r.log;

@@ -17,6 +17,7 @@
 using pnp::testing::ChildProcess;
 using pnp::testing::ClientRun;
 using pnp::testing::runClient;
+using pnp::testing::testLog;
 
 namespace {
 
@@ -42,7 +43,7 @@ class MiddlewareRos : public ::testing::Test {
         const unsigned short port = pnp::testing::freeLoopbackPort();
         std::string err;
         ASSERT_TRUE(master_.start({rosmaster, "--core", "-p", std::to_string(port)},
-                                  "/tmp/test_mw_ros_master.log", err))
+                                  testLog("ros_master"), err))
             << err;
         const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(20);
         while (!portAccepts(port)) {
@@ -58,14 +59,14 @@ class MiddlewareRos : public ::testing::Test {
         std::string err;
         ASSERT_TRUE(server.start(
             {kExe, "server", "--variant", variant, "--mode", mode, "--set", masterSet_},
-            "/tmp/test_mw_ros_server.log", err))
+            testLog("ros_server"), err))
             << err;
         ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(20), err))
             << err << server.logTail();
         auto r =
             runClient({kExe, "client", "--variant", variant, "--mode", mode, "--set", masterSet_,
                        "--reps", "20", "--warmup", "2", "--sizes", "0,2,1000,32768,65536"},
-                      60, "/tmp/test_mw_ros_client.log");
+                      60, testLog("ros_client"));
         ASSERT_EQ(r.exitCode, 0) << r.log;
         ASSERT_EQ(r.lines.size(), 5u);  // one summary per size
         EXPECT_NE(r.lines[0].find("\"payload\":0,"), std::string::npos) << r.lines[0];
@@ -100,7 +101,7 @@ TEST_F(MiddlewareRos, ChainCarriesThreeStreamsThroughSixNodeProcesses) {
     // 3 streams x 2 hops = 6 ROS nodes, each a child process of this one `node` process
     ASSERT_TRUE(nodes.start({kExe, "node", "--first", "0", "--count", "6", "--streams", "3",
                              "--hops", "2", "--set", masterSet_},
-                            "/tmp/test_mw_ros_nodes.log", err))
+                            testLog("ros_nodes"), err))
         << err;
     ASSERT_TRUE(nodes.waitForLine("READY", std::chrono::seconds(60), err))
         << err << nodes.logTail();
@@ -108,7 +109,7 @@ TEST_F(MiddlewareRos, ChainCarriesThreeStreamsThroughSixNodeProcesses) {
     EXPECT_EQ(children.size(), 6u);
     auto r = runClient({kExe, "client", "--mode", "chain", "--streams", "3", "--hops", "2",
                         "--runs", "10", "--set", masterSet_},
-                       60, "/tmp/test_mw_ros_chain.log");
+                       60, testLog("ros_chain"));
     ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 1u);
     EXPECT_NE(r.lines[0].find("\"n\":10"), std::string::npos) << r.lines[0];
@@ -123,7 +124,7 @@ TEST_F(MiddlewareRos, ChainNodesDieWithTheirKilledParent) {
     std::string err;
     ASSERT_TRUE(nodes.start({kExe, "node", "--first", "0", "--count", "2", "--streams", "1",
                              "--hops", "2", "--set", masterSet_},
-                            "/tmp/test_mw_ros_nodes_kill.log", err))
+                            testLog("ros_nodes_kill"), err))
         << err;
     ASSERT_TRUE(nodes.waitForLine("READY", std::chrono::seconds(60), err))
         << err << nodes.logTail();
@@ -140,7 +141,7 @@ TEST_F(MiddlewareRos, ChainNodesDieWithTheirKilledParent) {
 
 TEST_F(MiddlewareRos, TopicClientWithoutServerFailsWithAReason) {
     auto r = runClient({kExe, "client", "--set", masterSet_, "--timeout-ms", "500"}, 30,
-                       "/tmp/test_mw_ros_noserver.log");
+                       testLog("ros_noserver"));
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.log.find("no ROS topic server"), std::string::npos) << r.log;
 }
@@ -151,14 +152,14 @@ TEST_F(MiddlewareRos, ClientsOfAFrozenServerFailWithinTheirTimeout) {
         std::string err;
         ASSERT_TRUE(server.start(
             {kExe, "server", "--variant", variant, "--mode", "echo", "--set", masterSet_},
-            "/tmp/test_mw_ros_frozen.log", err))
+            testLog("ros_frozen"), err))
             << err;
         ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(20), err)) << err;
         ::kill(server.pid(), SIGSTOP);  // registered with the master, but never answers
         const auto t0 = std::chrono::steady_clock::now();
         auto r = runClient({kExe, "client", "--variant", variant, "--set", masterSet_,
                             "--timeout-ms", "500", "--sizes", "2", "--reps", "5"},
-                           30, "/tmp/test_mw_ros_frozen_client.log");
+                           30, testLog("ros_frozen_client"));
         const auto took = std::chrono::steady_clock::now() - t0;
         ::kill(server.pid(), SIGCONT);
         EXPECT_EQ(r.exitCode, 1) << variant << ": " << r.log;
@@ -175,7 +176,7 @@ TEST(MiddlewareRosNoMaster, ClientsWithoutMasterFailWithAReason) {
         const auto t0 = std::chrono::steady_clock::now();
         auto r = runClient(
             {kExe, "client", "--variant", variant, "--set", master, "--timeout-ms", "500"}, 30,
-            "/tmp/test_mw_ros_nomaster.log");
+            testLog("ros_nomaster"));
         const auto took = std::chrono::steady_clock::now() - t0;
         EXPECT_EQ(r.exitCode, 1) << variant;
         EXPECT_NE(r.log.find("unreachable"), std::string::npos) << variant << ": " << r.log;

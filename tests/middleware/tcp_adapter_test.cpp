@@ -7,6 +7,7 @@
 
 using pnp::testing::ChildProcess;
 using pnp::testing::runClient;
+using pnp::testing::testLog;
 
 namespace {
 
@@ -16,13 +17,13 @@ void roundTrip(const std::string& mode) {
     const std::string port = std::to_string(pnp::testing::freeLoopbackPort());
     ChildProcess server;
     std::string err;
-    ASSERT_TRUE(server.start({kExe, "server", "--mode", mode, "--port", port},
-                             "/tmp/test_mw_tcp_server.log", err))
+    ASSERT_TRUE(
+        server.start({kExe, "server", "--mode", mode, "--port", port}, testLog("tcp_server"), err))
         << err;
     ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(10), err)) << err;
     auto r = runClient({kExe, "client", "--mode", mode, "--port", port, "--reps", "20", "--warmup",
                         "2", "--sizes", "0,1,2,1000,32768,65536"},
-                       60, "/tmp/test_mw_tcp_client.log");
+                       60, testLog("tcp_client"));
     ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 6u);  // one summary per size
     EXPECT_NE(r.lines[4].find("\"payload\":32768"), std::string::npos) << r.lines[4];
@@ -46,7 +47,7 @@ TEST(MiddlewareTcp, ChainCarriesThreeStreamsThroughTheNodes) {
 TEST(MiddlewareTcp, ClientWithoutServerFailsWithAReason) {
     const std::string port = std::to_string(pnp::testing::freeLoopbackPort());
     auto r = runClient({kExe, "client", "--port", port, "--timeout-ms", "300"}, 30,
-                       "/tmp/test_mw_tcp_noserver.log");
+                       testLog("tcp_noserver"));
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.log.find("connect"), std::string::npos) << r.log;
 }

@@ -16,6 +16,7 @@
 
 using pnp::testing::ChildProcess;
 using pnp::testing::runClient;
+using pnp::testing::testLog;
 
 namespace {
 
@@ -25,13 +26,13 @@ void roundTrip(const std::string& mode) {
     const std::string port = std::to_string(pnp::testing::freeLoopbackPort());
     ChildProcess server;
     std::string err;
-    ASSERT_TRUE(server.start({kExe, "server", "--mode", mode, "--port", port},
-                             "/tmp/test_mw_udp_server.log", err))
+    ASSERT_TRUE(
+        server.start({kExe, "server", "--mode", mode, "--port", port}, testLog("udp_server"), err))
         << err;
     ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(10), err)) << err;
     auto r = runClient({kExe, "client", "--mode", mode, "--port", port, "--reps", "20", "--warmup",
                         "2", "--sizes", "0,1,2,1000,32768,65499"},
-                       60, "/tmp/test_mw_udp_client.log");
+                       60, testLog("udp_client"));
     ASSERT_EQ(r.exitCode, 0) << r.log;
     ASSERT_EQ(r.lines.size(), 6u);  // one summary per size
     EXPECT_NE(r.lines[4].find("\"payload\":32768"), std::string::npos) << r.lines[4];
@@ -50,12 +51,12 @@ TEST(MiddlewareUdp, PayloadLargerThanOneDatagramIsRefusedWithAReason) {
     ChildProcess server;
     std::string err;
     ASSERT_TRUE(server.start({kExe, "server", "--mode", "echo", "--port", port},
-                             "/tmp/test_mw_udp_server_big.log", err))
+                             testLog("udp_server_big"), err))
         << err;
     ASSERT_TRUE(server.waitForLine("READY", std::chrono::seconds(10), err)) << err;
     auto r = runClient(
         {kExe, "client", "--port", port, "--reps", "1", "--warmup", "0", "--sizes", "65500"}, 30,
-        "/tmp/test_mw_udp_big.log");
+        testLog("udp_big"));
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.log.find("does not fit into one UDP datagram"), std::string::npos) << r.log;
 }
@@ -101,7 +102,7 @@ TEST(MiddlewareUdp, LostRequestsAreRetransmittedAndLateAnswersDiscarded) {
     auto r = runClient({kExe, "client", "--mode", "echo", "--port",
                         std::to_string(ntohs(a.sin_port)), "--reps", "5", "--warmup", "0",
                         "--sizes", "2,1000", "--set", "retransmit-ms=50", "--timeout-ms", "2000"},
-                       30, "/tmp/test_mw_udp_retransmit.log");
+                       30, testLog("udp_retransmit"));
     stop = true;
     fake.join();
     ::close(fd);
@@ -129,7 +130,7 @@ TEST(MiddlewareUdp, ClientWithoutServerFailsWithAReasonWithinItsTimeout) {
     const std::string port = std::to_string(pnp::testing::freeLoopbackPort());
     const auto t0 = std::chrono::steady_clock::now();
     auto r = runClient({kExe, "client", "--port", port, "--timeout-ms", "300"}, 30,
-                       "/tmp/test_mw_udp_noserver.log");
+                       testLog("udp_noserver"));
     const auto took = std::chrono::steady_clock::now() - t0;
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.log.find("no answer from 127.0.0.1:" + port + " within 300 ms"), std::string::npos)
