@@ -20,6 +20,8 @@ PACKAGES=(
     build-essential g++ cmake ninja-build pkg-config git python3
     # repeated builds on one machine (scripts/build.sh uses it when present; never required)
     ccache
+    # the LLVM linker (CMakeLists.txt uses it when usable: links 4x faster than GNU ld)
+    lld
     # clang 14 (Debian default) + its sanitizer/libFuzzer runtime, LLVM tools
     # (llvm-symbolizer for sanitizer stack traces)
     clang libclang-rt-14-dev llvm
