@@ -3,9 +3,11 @@
 #   1. scripts/setup.sh                      (packages + npm ci)
 #   2. release build  + ctest (build/); the ctest entries test_ua_client_interop and
 #      test_ua_client_subscription_interop run our client against node-opcua servers
-#   3. asan build     + ctest (build-asan/, g++, labels bench|fuzz excluded)
-#   4. fuzz build (build-fuzz/, clang-19, only the fuzz/ targets), then every libFuzzer
-#      target found there for PNP_FUZZ_SECONDS each (default 60)
+#   3. asan build     + ctest (build-asan/, clang-19: the tests and the libFuzzer targets;
+#      labels bench|fuzz excluded)
+#   4. every libFuzzer target of build-asan/fuzz/ for PNP_FUZZ_SECONDS each (default 60),
+#      PNP_FUZZ_JOBS at a time (default: the number of cores); when the asan tree has none
+#      (g++), a fuzz tree is built for them first (build-fuzz/, clang-19)
 #   5. interop: node-opcua client vs node-opcua server (validates the harness);
 #      node-opcua client vs `build/apps/pnp/pnp ua serve`; tshark capture of that run
 # Ends with one line "N passed, N failed, N skipped" (tests, not steps) and exits
@@ -13,6 +15,7 @@
 #
 # Environment:
 #   PNP_FUZZ_SECONDS=60        libFuzzer -max_total_time per target (0 disables fuzzing)
+#   PNP_FUZZ_JOBS=N            fuzz targets run at a time (default: nproc, at least 2)
 #   PNP_INTEROP=auto|on|off    auto (default): pnp interop runs when build/apps/pnp/pnp
 #                              exists; on: a missing binary is a failure; off: skip
 #   PNP_SKIP_ASAN=1            skip step 3
@@ -24,6 +27,8 @@ cd "$ROOT" || exit 1
 NPROC="$(nproc)"
 JOBS=$((NPROC < 2 ? 2 : NPROC))
 FUZZ_SECONDS="${PNP_FUZZ_SECONDS:-60}"
+FUZZ_JOBS="${PNP_FUZZ_JOBS:-$JOBS}"
+[[ "$FUZZ_JOBS" =~ ^[1-9][0-9]*$ ]] || FUZZ_JOBS=$JOBS
 INTEROP="${PNP_INTEROP:-auto}"
 PNP_BIN="$ROOT/build/apps/pnp/pnp"
 LOGS="$ROOT/build-logs"
@@ -157,60 +162,77 @@ elif run_build asan; then
 fi
 
 # ---------------------------------------------------------------------------------
-# 4. fuzzing (clang + libFuzzer, separate tree build-fuzz/)
+# 4. fuzzing: the libFuzzer targets of the asan tree (clang builds them there), else of a
+#    fuzz tree built for them; FUZZ_JOBS targets at a time, each for FUZZ_SECONDS
 # ---------------------------------------------------------------------------------
 banner "fuzz"
+# fuzz_targets DIR: the fuzz executables built in DIR
+fuzz_targets() {
+    find "$1/fuzz" -maxdepth 1 -type f -perm -u+x -name 'fuzz_*' 2>/dev/null | sort
+}
+# run_fuzzer EXE CORPUS_ROOT: one libFuzzer run; its exit code in $LOGS/fuzz-NAME.rc
+run_fuzzer() {
+    local fz="$1" name corpus artifacts seeds=() d
+    name="$(basename "$fz")"
+    corpus="$2/corpus/$name"
+    artifacts="$2/artifacts"
+    mkdir -p "$corpus" "$artifacts"
+    for d in "$ROOT/fuzz/corpus/$name" "$ROOT/fuzz/$name" "$ROOT/tests/fuzz/corpus/$name"; do
+        [[ -d "$d" ]] && seeds+=("$d")
+    done
+    echo "running $name for ${FUZZ_SECONDS}s (corpus $corpus${seeds[*]:+, seeds: ${seeds[*]}})"
+    timeout -k 10 $((FUZZ_SECONDS + 120)) "$fz" -max_total_time="$FUZZ_SECONDS" -timeout=10 \
+        -rss_limit_mb=4096 -print_final_stats=1 -artifact_prefix="$artifacts/$name-" \
+        "$corpus" "${seeds[@]}" >"$LOGS/fuzz-$name.log" 2>&1
+    echo $? >"$LOGS/fuzz-$name.rc"
+}
 if [[ "$FUZZ_SECONDS" == "0" ]]; then
     echo "fuzzing disabled (PNP_FUZZ_SECONDS=0)"
     step_result "fuzz" "skip" "disabled"
 else
-    FUZZ_BUILD_OK=0
-    bash "$ROOT/scripts/build.sh" fuzz 2>&1 | tee "$LOGS/build-fuzz.log"
-    rc=${PIPESTATUS[0]}
-    if [[ $rc -eq 0 ]]; then
-        FUZZ_BUILD_OK=1
-        step_result "build fuzz (clang)" "ok"
-    elif [[ $rc -eq 3 ]]; then
-        echo "no usable clang: fuzz targets not built"
-        step_result "build fuzz (clang)" "skip" "no clang >= 16"
+    FUZZ_TREE=""
+    if [[ -n "$(fuzz_targets "$ROOT/build-asan")" ]]; then
+        FUZZ_TREE="$ROOT/build-asan"
+        echo "fuzz targets of the asan tree (build-asan/fuzz)"
     else
-        FAILED=$((FAILED + 1))
-        step_result "build fuzz (clang)" "FAIL" "see $LOGS/build-fuzz.log"
-    fi
-    FUZZERS=()
-    if [[ $FUZZ_BUILD_OK -eq 1 ]]; then
-        mapfile -t FUZZERS < <(
-            {
-                find "$ROOT/build-fuzz/fuzz" -type f -perm -u+x -not -path '*/CMakeFiles/*' 2>/dev/null
-                find "$ROOT/build-fuzz" -type f -perm -u+x -name 'fuzz_*' -not -path '*/CMakeFiles/*' 2>/dev/null
-            } | sort -u
-        )
-        if ((${#FUZZERS[@]} == 0)); then
-            echo "no fuzz target built yet (looked for executables in build-fuzz/fuzz/ and fuzz_* in build-fuzz/): skipping"
-            step_result "fuzz" "skip" "no fuzz target yet"
+        bash "$ROOT/scripts/build.sh" fuzz 2>&1 | tee "$LOGS/build-fuzz.log"
+        rc=${PIPESTATUS[0]}
+        if [[ $rc -eq 0 ]]; then
+            FUZZ_TREE="$ROOT/build-fuzz"
+            step_result "build fuzz (clang)" "ok"
+        elif [[ $rc -eq 3 ]]; then
+            echo "no usable clang: fuzz targets not built"
+            step_result "build fuzz (clang)" "skip" "no clang >= 16"
+        else
+            FAILED=$((FAILED + 1))
+            step_result "build fuzz (clang)" "FAIL" "see $LOGS/build-fuzz.log"
         fi
     fi
+    FUZZERS=()
+    [[ -n "$FUZZ_TREE" ]] && mapfile -t FUZZERS < <(fuzz_targets "$FUZZ_TREE")
+    if [[ -n "$FUZZ_TREE" ]] && ((${#FUZZERS[@]} == 0)); then
+        echo "no fuzz target in $FUZZ_TREE/fuzz: skipping"
+        step_result "fuzz" "skip" "no fuzz target"
+    fi
+    # Each libFuzzer run is one process on one core.
+    for ((i = 0; i < ${#FUZZERS[@]}; i += FUZZ_JOBS)); do
+        for fz in "${FUZZERS[@]:i:FUZZ_JOBS}"; do
+            rm -f "$LOGS/fuzz-$(basename "$fz").rc"
+            run_fuzzer "$fz" "$FUZZ_TREE" &
+        done
+        wait
+    done
     for fz in "${FUZZERS[@]}"; do
         name="$(basename "$fz")"
-        corpus="$ROOT/build-fuzz/corpus/$name"
-        artifacts="$ROOT/build-fuzz/artifacts"
-        mkdir -p "$corpus" "$artifacts"
-        seeds=()
-        for d in "$ROOT/fuzz/corpus/$name" "$ROOT/fuzz/$name" "$ROOT/tests/fuzz/corpus/$name"; do
-            [[ -d "$d" ]] && seeds+=("$d")
-        done
-        echo "running $name for ${FUZZ_SECONDS}s (corpus $corpus${seeds[*]:+, seeds: ${seeds[*]}})"
-        timeout -k 10 $((FUZZ_SECONDS + 120)) "$fz" -max_total_time="$FUZZ_SECONDS" -timeout=10 \
-            -rss_limit_mb=4096 -print_final_stats=1 -artifact_prefix="$artifacts/$name-" \
-            "$corpus" "${seeds[@]}" >"$LOGS/fuzz-$name.log" 2>&1
-        rc=$?
+        rc="$(cat "$LOGS/fuzz-$name.rc" 2>/dev/null || echo 1)"
+        echo "--- $name (exit $rc)"
         tail -n 15 "$LOGS/fuzz-$name.log"
-        if [[ $rc -eq 0 ]]; then
+        if [[ "$rc" == 0 ]]; then
             PASSED=$((PASSED + 1))
             step_result "fuzz $name" "ok" "${FUZZ_SECONDS}s"
         else
             FAILED=$((FAILED + 1))
-            step_result "fuzz $name" "FAIL" "exit $rc, artifacts in $artifacts, log $LOGS/fuzz-$name.log"
+            step_result "fuzz $name" "FAIL" "exit $rc, artifacts in $FUZZ_TREE/artifacts, log $LOGS/fuzz-$name.log"
         fi
     done
 fi
