@@ -31,6 +31,9 @@ PACKAGES=(
     # libraries
     libasio-dev libpugixml-dev libssl-dev libfmt-dev libspdlog-dev libcli11-dev
     nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev
+    # robot kinematics and motion (src/kinematics, src/motion): KDL chains from DH tables or
+    # URDF, Eigen for poses
+    liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libeigen3-dev
     # interop / capture / process tools
     tshark iproute2 procps util-linux
     # discovery interop (tests/discovery/discovery_interop_netns_test.cpp): avahi in a
