@@ -34,6 +34,8 @@ PACKAGES=(
     # robot kinematics and motion (src/kinematics, src/motion): KDL chains from DH tables or
     # URDF, Eigen for poses
     liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libeigen3-dev
+    # the cell description file (src/world): YAML with the line of every node, for errors
+    libyaml-cpp-dev
     # interop / capture / process tools
     tshark iproute2 procps util-linux
     # discovery interop (tests/discovery/discovery_interop_netns_test.cpp): avahi in a
