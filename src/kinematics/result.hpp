@@ -1,9 +1,8 @@
 #pragma once
 
-#include <cassert>
 #include <string>
-#include <utility>
-#include <variant>
+
+#include "base/result.hpp"
 
 namespace pnp::kinematics {
 
@@ -24,40 +23,8 @@ struct Error {
     std::string message;
 };
 
-// A value or an Error (std::expected is C++23). Nothing in this module throws past its API.
+// A value or an Error: nothing in this module throws past its API.
 template <class T>
-class Result {
-  public:
-    Result(T value) : v_(std::move(value)) {}      // NOLINT(google-explicit-constructor)
-    Result(Error error) : v_(std::move(error)) {}  // NOLINT(google-explicit-constructor)
-
-    bool ok() const { return v_.index() == 0; }
-    explicit operator bool() const { return ok(); }
-
-    const T& value() const& {
-        assert(ok());
-        return std::get<0>(v_);
-    }
-    T& value() & {
-        assert(ok());
-        return std::get<0>(v_);
-    }
-    T&& value() && {
-        assert(ok());
-        return std::get<0>(std::move(v_));
-    }
-    const T& operator*() const& { return value(); }
-    T& operator*() & { return value(); }
-    const T* operator->() const { return &value(); }
-    T* operator->() { return &value(); }
-
-    const Error& error() const {
-        assert(!ok());
-        return std::get<1>(v_);
-    }
-
-  private:
-    std::variant<T, Error> v_;
-};
+using Result = base::Result<T, Error>;
 
 }  // namespace pnp::kinematics

@@ -14,6 +14,7 @@
 #include <utility>
 #include <variant>
 
+#include "base/result.hpp"
 #include "motion/timing_law.hpp"
 
 namespace pnp::motion {
@@ -61,21 +62,9 @@ struct Error {
     std::optional<Eigen::Vector3d> position;  // Cartesian position there (LIN)
 };
 
-// Value or error; deliberately small (no exceptions across the API).
+// A value or an Error: nothing in this module throws past its API.
 template <class T>
-class Result {
-  public:
-    Result(T value) : v_(std::move(value)) {}      // NOLINT: implicit on purpose
-    Result(Error error) : v_(std::move(error)) {}  // NOLINT
-    bool ok() const { return v_.index() == 0; }
-    explicit operator bool() const { return ok(); }
-    const T& value() const { return std::get<0>(v_); }
-    T& value() { return std::get<0>(v_); }
-    const Error& error() const { return std::get<1>(v_); }
-
-  private:
-    std::variant<T, Error> v_;
-};
+using Result = base::Result<T, Error>;
 
 struct JointSample {
     Joints position{};
