@@ -15,6 +15,11 @@
 namespace pnp::cli {
 // bench_commands.cpp: adds `pnp bench ...`; the function runs the parsed one (-1: none).
 std::function<int()> addBenchCommands(CLI::App& app);
+// The cell's devices, same pattern: sim_commands.cpp (`pnp sim`), device_commands.cpp
+// (`pnp device ...`), robot_commands.cpp (`pnp robot ...`).
+std::function<int()> addSimCommands(CLI::App& app);
+std::function<int()> addDeviceCommands(CLI::App& app);
+std::function<int()> addRobotCommands(CLI::App& app);
 }  // namespace pnp::cli
 
 namespace {
@@ -327,6 +332,9 @@ int main(int argc, char** argv) {
     events->footer("Runs until Ctrl-C, --count or --duration.");
 
     const auto runBench = addBenchCommands(app);
+    const auto runSim = addSimCommands(app);
+    const auto runDevice = addDeviceCommands(app);
+    const auto runRobot = addRobotCommands(app);
 
     try {
         app.parse(argc, argv);
@@ -341,6 +349,9 @@ int main(int argc, char** argv) {
                       (*monitor && moOpts.json) || (*events && evOpts.json);
     try {
         if (const int rc = runBench(); rc >= 0) return rc;
+        if (const int rc = runSim(); rc >= 0) return rc;
+        if (const int rc = runDevice(); rc >= 0) return rc;
+        if (const int rc = runRobot(); rc >= 0) return rc;
         if (*serve) return runServe(serveOpts);
         if (*demoSkills) return runServe(skillsOpts);
         if (*skillsCmd) return runSkills(skillsListOpts);
