@@ -9,6 +9,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -69,6 +70,9 @@ struct OutputRecipe {
     std::vector<Type> types;
     Clock::duration period{};
     Clock::time_point next{};
+    // externalCycle: a sample every `every` control cycles; the cycle of the next one.
+    std::uint64_t every = 1;
+    std::uint64_t nextCycle = 0;
 };
 
 struct InputRecipe {
@@ -113,6 +117,7 @@ struct Server::Impl {
     std::mutex pendingMutex;
     std::vector<TextMessage> pendingTexts;
 
+    std::atomic<std::uint64_t> cycles{0};  // Server::cycle() calls (externalCycle)
     std::atomic<std::size_t> clientCount{0};
     std::atomic<std::uint64_t> sent{0};
     std::atomic<std::uint64_t> skipped{0};
@@ -210,6 +215,15 @@ void Server::sendText(const TextMessage& message) {
     }
 }
 
+void Server::cycle() {
+    Impl& d = *impl_;
+    d.cycles.fetch_add(1);
+    if (d.wakeFd >= 0) {
+        std::uint64_t one = 1;
+        [[maybe_unused]] auto n = ::write(d.wakeFd, &one, sizeof one);
+    }
+}
+
 ServerStats Server::stats() const {
     const Impl& d = *impl_;
     return {d.clientCount.load(), d.sent.load(), d.skipped.load(), d.errorCloses.load()};
@@ -222,7 +236,7 @@ void Server::Impl::run() {
         // Sleep until the earliest sample deadline of any started connection.
         std::optional<Clock::time_point> wake;
         for (auto& [id, c] : connections) {
-            if (!c.started) continue;
+            if (!c.started || config.externalCycle) continue;
             for (auto& [rid, r] : c.outputs) {
                 if (!wake || r.next < *wake) wake = r.next;
             }
@@ -369,7 +383,11 @@ void Server::Impl::handle(Connection& c, Package&& package) {
         enqueue(c, StartReply{true});
         // The first sample goes out at once, later ones on the recipe's grid.
         const auto now = Clock::now();
-        for (auto& [id, r] : c.outputs) r.next = now;
+        const auto cycle = cycles.load() + 1;
+        for (auto& [id, r] : c.outputs) {
+            r.next = now;
+            r.nextCycle = cycle;
+        }
     } else if (std::holds_alternative<Pause>(package)) {
         c.started = false;
         enqueue(c, PauseReply{true});
@@ -405,6 +423,8 @@ void Server::Impl::handleSetupOutputs(Connection& c, const SetupOutputs& request
     if (ok && problem.empty()) {
         recipe.period = std::chrono::duration_cast<Clock::duration>(
             std::chrono::duration<double>(1.0 / request.frequency));
+        recipe.every = std::max<std::uint64_t>(
+            1, static_cast<std::uint64_t>(std::llround(config.maxFrequency / request.frequency)));
         reply.recipeId = c.nextRecipeId++;  // wraps to 0 after 255: no further recipes
         c.outputs.emplace(reply.recipeId, std::move(recipe));
     }
@@ -456,6 +476,7 @@ void Server::Impl::handleData(Connection& c, const DataPackage& data) {
     }
     auto& list = std::get<std::vector<Value>>(values);
     for (std::size_t i = 0; i < list.size(); ++i) state.write(it->second.names[i], list[i]);
+    state.endInputPackage();
 }
 
 Value Server::Impl::sample(const std::string& name, Type type) {
@@ -469,8 +490,15 @@ Value Server::Impl::sample(const std::string& name, Type type) {
 }
 
 void Server::Impl::stream(Connection& c, Clock::time_point now) {
+    const std::uint64_t cycle = cycles.load();
     for (auto& [id, r] : c.outputs) {
-        if (now < r.next) continue;
+        if (config.externalCycle) {
+            if (cycle < r.nextCycle) continue;
+            // One sample of the newest state however many cycles passed since the last.
+            r.nextCycle += r.every * ((cycle - r.nextCycle) / r.every + 1);
+        } else if (now < r.next) {
+            continue;
+        }
         if (c.queued() > config.softQueueLimit) {
             ++skipped;  // the client does not keep up: it gets the newest sample later
         } else {
@@ -482,6 +510,7 @@ void Server::Impl::stream(Connection& c, Clock::time_point now) {
             enqueue(c, DataPackage{id, encodeValues(values)});
             ++sent;
         }
+        if (config.externalCycle) continue;
         // Absolute deadlines on the recipe's grid: no drift; missed slots are skipped.
         r.next += r.period;
         if (r.next <= now) {

@@ -27,6 +27,9 @@ class ControllerState {
     virtual ~ControllerState() = default;
     virtual Value read(std::string_view name) = 0;
     virtual void write(std::string_view name, const Value& value) = 0;
+    // After the write()s of one input data package: a controller that takes a stream of
+    // packages (a simulator's servo) can tell them apart. Network thread.
+    virtual void endInputPackage() {}
 };
 
 // A thread-safe map of every catalogue variable (zero at first): enough for tests and a simple
@@ -60,6 +63,10 @@ struct ServerConfig {
     // SO_SNDBUF of each connection (0 = the kernel's default, which grows to megabytes): small,
     // so that a lagging client is noticed soon and gets fresh samples instead of stale ones.
     int socketSendBuffer = 32 * 1024;
+    // Samples go out on cycle() (the controller's control cycle: a simulator's step loop,
+    // at maxFrequency), as a real controller publishes its state once per cycle, instead of
+    // on the server's own clock. A recipe at maxFrequency / N gets every Nth cycle.
+    bool externalCycle = false;
     // Told why a connection was dropped (malformed package, overflow); network thread.
     std::function<void(std::string_view)> log;
 };
@@ -88,6 +95,9 @@ class Server {
     // Sends a text message to every client that negotiated the protocol version. Any thread,
     // but not concurrently with start() / stop().
     void sendText(const TextMessage& message);
+    // externalCycle: one control cycle has passed (its state is ready to read). Any thread;
+    // never blocks (the network thread sends).
+    void cycle();
     ServerStats stats() const;
 
   private:
