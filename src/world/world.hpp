@@ -21,8 +21,8 @@ using kinematics::Joints;
 
 struct RobotState {
     std::string name;
-    Joints q{};   // rad
-    Joints qd{};  // rad/s
+    Joints q{};                                                // rad
+    Joints qd{};                                               // rad/s
     Eigen::Isometry3d flange = Eigen::Isometry3d::Identity();  // world frame
     Eigen::Isometry3d tcp = Eigen::Isometry3d::Identity();     // flange * tool TCP (world)
     std::optional<std::string> tool;                           // locked on the flange
@@ -66,17 +66,28 @@ class World {
     std::size_t robotCount() const { return robots_.size(); }
     const RobotState& robot(std::size_t index) const { return robots_.at(index); }
     // Set by the robot's controller simulator once per step (within its joint limits).
-    void setJoints(std::size_t robot, const Joints& q, const Joints& qd);
+    // Updates the robot's flange and TCP poses and its contact force at once.
+    // A non-finite value rejects the whole call (returns false, nothing changes); positions
+    // beyond the joint limits are clamped to them, with that joint's velocity set to 0.
+    // Throws std::out_of_range for an unknown robot index, like robot().
+    bool setJoints(std::size_t robot, const Joints& q, const Joints& qd);
 
     const std::vector<ObjectState>& objects() const { return objects_; }
     const std::vector<ToolState>& tools() const { return tools_; }
 
     // Advances time by dt: updates flange / TCP poses, contact forces, held objects.
+    // dt = 0 (or a non-finite / negative dt) only refreshes them: no time, no step counted.
     void step(double dt);
     double time() const { return time_; }
     std::uint64_t steps() const { return steps_; }
 
     Snapshot snapshot() const;
+
+    // The contact force (world frame, N) on a point: the spring of the deepest top face
+    // (tables, objects resting somewhere, not held ones) whose footprint holds the point and
+    // below which it lies, within the body's height; zero otherwise. step() applies it to
+    // each robot's TCP point.
+    Eigen::Vector3d contactForceAt(const Eigen::Vector3d& point) const;
 
   private:
     void update(std::size_t robot);
