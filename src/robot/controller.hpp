@@ -24,19 +24,21 @@ struct ControllerConfig {
     std::chrono::milliseconds reconnectDelay{500};
     // Used to brake when no trajectory is running (e.g. a position stream): rad/s².
     motion::JointLimits limits;
+    // Added: one (re)connect attempt may take this long (start() has its own deadline).
+    std::chrono::milliseconds connectTimeout{2000};
 };
 
 // How a motion ended.
 enum class MotionEnd {
-    kCompleted,       // at the goal
-    kHalted,          // halt(): braked along the path to rest
-    kForceExceeded,   // the force limit was exceeded: braked along the path to rest
-    kFailed,          // link lost, protective stop, controller stopped following...
+    kCompleted,      // at the goal
+    kHalted,         // halt(): braked along the path to rest
+    kForceExceeded,  // the force limit was exceeded: braked along the path to rest
+    kFailed,         // link lost, protective stop, controller stopped following...
 };
 
 struct MotionResult {
     MotionEnd end = MotionEnd::kCompleted;
-    std::string message;                          // why, for anything but kCompleted
+    std::string message;                                 // why, for anything but kCompleted
     Eigen::Vector3d maxForce = Eigen::Vector3d::Zero();  // largest |force| per axis seen, N
 };
 
@@ -71,10 +73,14 @@ class Stream : public Motion {
 
 struct LoopStats {
     std::uint64_t cycles = 0;
-    double periodMedian = 0.0;       // s, between successive samples (recent window)
-    double periodErrorP99 = 0.0;     // s, |period - cycleTime| at the 99th percentile
+    double periodMedian = 0.0;    // s, between successive samples (recent window)
+    double periodErrorP99 = 0.0;  // s, |period - cycleTime| at the 99th percentile
     double periodErrorMax = 0.0;
     std::uint64_t linkLosses = 0;
+    // Added: samples in the window behind the figures, and whether the loop thread got
+    // SCHED_FIFO (false: normal scheduling, e.g. no CAP_SYS_NICE / rtprio limit).
+    std::uint64_t window = 0;
+    bool realtime = false;
 };
 
 class Controller {
@@ -92,6 +98,8 @@ class Controller {
     bool connected() const;
     std::optional<State> state() const;  // the latest sample
     // Called on the loop thread after every sample (keep it short: copy and return).
+    // Replacing it (e.g. onState({})) returns only once the old one no longer runs, so a
+    // callback capturing locals is safe if it is cleared before they go.
     void onState(std::function<void(const State&)> callback);
 
     // Hands a planned trajectory to the loop; it must start at the current position

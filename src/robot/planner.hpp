@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -39,6 +40,32 @@ struct CartesianTarget {
     std::optional<kinematics::AxisBounds> bounds;
 };
 
+namespace detail {
+// A pose read by planning threads and set by another (the cell's calibration): copyable so
+// that Planner stays a value type.
+class GuardedPose {
+  public:
+    explicit GuardedPose(const Eigen::Isometry3d& pose) : pose_(pose) {}
+    GuardedPose(const GuardedPose& other) : pose_(other.get()) {}
+    GuardedPose& operator=(const GuardedPose& other) {
+        if (this != &other) set(other.get());
+        return *this;
+    }
+    Eigen::Isometry3d get() const {
+        std::lock_guard lock(mutex_);
+        return pose_;
+    }
+    void set(const Eigen::Isometry3d& pose) {
+        std::lock_guard lock(mutex_);
+        pose_ = pose;
+    }
+
+  private:
+    mutable std::mutex mutex_;
+    Eigen::Isometry3d pose_;
+};
+}  // namespace detail
+
 class Planner {
   public:
     explicit Planner(PlannerConfig config);
@@ -51,8 +78,7 @@ class Planner {
     // limits, axis bounds, singularities along a line) and names the problem in Error.
     Result<motion::Trajectory> cartesianPtp(const Joints& current, const CartesianTarget& target,
                                             const PtpLimits& limits) const;
-    Result<motion::Trajectory> cartesianLinear(const Joints& current,
-                                               const CartesianTarget& target,
+    Result<motion::Trajectory> cartesianLinear(const Joints& current, const CartesianTarget& target,
                                                const LinLimits& limits) const;
     Result<motion::Trajectory> jointPtp(const Joints& current, const std::vector<double>& target,
                                         const PtpLimits& limits) const;
@@ -67,8 +93,16 @@ class Planner {
     // The tool frame's pose in the world frame at q.
     Eigen::Isometry3d toolPose(const Joints& q, const Eigen::Isometry3d& tool) const;
 
+    // Added: the pieces of the requests above, for skills that check before they plan.
+    // The joints that put the target's tool frame at its pose, nearest `current`.
+    Result<Joints> solve(const Joints& current, const CartesianTarget& target) const;
+    // The request's limits resolved against the defaults (the maxima), checked.
+    Result<motion::JointLimits> jointLimits(const PtpLimits& limits) const;
+    Result<motion::CartesianLimits> cartesianLimits(const LinLimits& limits) const;
+
   private:
-    PlannerConfig config_;
+    PlannerConfig config_;  // config_.worldToBase is not used: worldToBase_ is the live one
+    detail::GuardedPose worldToBase_;
 };
 
 }  // namespace pnp::robot
