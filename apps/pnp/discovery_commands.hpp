@@ -11,7 +11,14 @@
 #include "ua/discovery/registrar.hpp"
 #include "ua/server/server.hpp"
 
+namespace CLI {
+class App;
+}
+
 namespace pnp::cli {
+
+// The discovery options of a server subcommand (`pnp lds`: lds = true).
+void addDiscoveryOptions(CLI::App* cmd, DiscoveryOptions& options, bool lds);
 
 // ApplicationUri (unique per server: urn:pnp:<public host>:<port>), public host, name and
 // the LDS settings. lds: the server is an LDS-ME (`pnp lds`).

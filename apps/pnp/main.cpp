@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "commands.hpp"
+#include "discovery_commands.hpp"
 #include "output.hpp"
 #include "ua/client/error.hpp"
 #include "ua/types/ns0_types_model.hpp"
@@ -41,43 +42,6 @@ void addClientOptions(CLI::App* cmd, ClientOptions& o) {
         ->capture_default_str()
         ->check(CLI::Range(1, 3600000));
     cmd->add_option("--user", o.user, "user name identity NAME:PASSWORD (default: anonymous)");
-}
-
-void addDiscoveryOptions(CLI::App* cmd, DiscoveryOptions& o, bool lds) {
-    cmd->add_option("--public-host", o.publicHost,
-                    "host name or address put into endpoint URLs (default: --host, or the "
-                    "host name)");
-    cmd->add_option("--application-uri", o.applicationUri,
-                    "ApplicationUri (default urn:pnp:<public host>:<port>)");
-    cmd->add_option("--name", o.name, "ApplicationName, also the mDNS instance name");
-    cmd->add_option("--lds", o.lds,
-                    lds ? "register with this (higher) LDS-ME" : "register with this LDS-ME only");
-    if (!lds) {
-        cmd->add_flag("--no-register", o.noRegister, "do not register with any LDS-ME");
-        cmd->add_flag("--lds-me", o.ldsMe,
-                      "also be an LDS-ME (a workstation: its devices register here)");
-    }
-    cmd->add_option("--discovery-group", o.group,
-                    "discovery group: register only with LDS-MEs of this group (TXT dg=)");
-    cmd->add_option("--discovery-level", o.level,
-                    "LDS-ME level (0 = cell bus; default 0 for `pnp lds`, 1 for --lds-me)")
-        ->check(CLI::Range(0, 100));
-    cmd->add_option("--mdns-interface", o.mdnsInterfaces,
-                    "mDNS on this interface (repeatable; default: every multicast interface "
-                    "for --host 0.0.0.0, the address's interface otherwise)");
-    cmd->add_option("--mdns-port", o.mdnsPort, "mDNS UDP port (5353; tests use another)")
-        ->capture_default_str()
-        ->check(CLI::Range(1, 65535));
-    cmd->add_option("--mdns-ttl", o.mdnsTtl, "TTL of our mDNS records, s")
-        ->capture_default_str()
-        ->check(CLI::Range(1, 4500));
-    cmd->add_option("--registration-expiry", o.expiryMs,
-                    "LDS-ME: drop a registration not renewed within MS ms")
-        ->capture_default_str()
-        ->check(CLI::Range(100, 3600000));
-    cmd->add_option("--register-interval", o.registerIntervalMs, "re-register every MS ms")
-        ->capture_default_str()
-        ->check(CLI::Range(10, 3600000));
 }
 
 int uaError(const pnp::ua::client::Error& e, bool json) {

@@ -45,8 +45,8 @@ ThreeDVector toThreeDVector(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.
 bool finite(const ThreeDFrame& f) {
     const auto& p = f.cartesianCoordinates;
     const auto& o = f.orientation;
-    return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) &&
-           std::isfinite(o.a) && std::isfinite(o.b) && std::isfinite(o.c);
+    return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && std::isfinite(o.a) &&
+           std::isfinite(o.b) && std::isfinite(o.c);
 }
 
 }  // namespace pnp::ua::spatial

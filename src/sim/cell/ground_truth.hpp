@@ -1,0 +1,47 @@
+// The world's ground truth as a read-only OPC UA view (namespace urn:pnp:sim:world), for
+// tests, the dashboard and users — never for adapters or components:
+//
+//   Objects/World                 Time (Double, s), Step (UInt64), CellName (String)
+//     Robots/<robot>              Joints, JointVelocities (Double[6]: rad, rad/s),
+//                                 FlangePose, TcpPose (ThreeDFrame, world), TcpForce
+//                                 (ThreeDVector, N, world), Tool (String, "" = none)
+//     Objects/<object>            Pose (ThreeDFrame), Holder (String)
+//     Tools/<tool>                Dock (String), Robot (String)
+//
+// Poses use pnp's convention (ua/spatial/spatial.hpp). Values are updated from the
+// simulator's snapshots at `rate` by a thread of its own, only when they changed.
+#pragma once
+
+#include <memory>
+#include <string_view>
+
+#include "sim/cell/simulator.hpp"
+#include "ua/server/server.hpp"
+
+namespace pnp::sim::cell {
+
+inline constexpr std::string_view kWorldNamespaceUri = "urn:pnp:sim:world";
+
+struct GroundTruthOptions {
+    double rate = 125.0;  // updates per second
+};
+
+class GroundTruth {
+  public:
+    // Adds the nodes (before server.start()); start() begins the updates.
+    GroundTruth(ua::server::Server& server, const Simulator& simulator,
+                GroundTruthOptions options = {});
+    ~GroundTruth();  // stop()
+    GroundTruth(const GroundTruth&) = delete;
+    GroundTruth& operator=(const GroundTruth&) = delete;
+
+    void start();
+    void stop();
+    ua::UInt16 namespaceIndex() const;
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace pnp::sim::cell

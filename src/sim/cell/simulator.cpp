@@ -1,0 +1,174 @@
+#include "sim/cell/simulator.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <mutex>
+#include <stdexcept>
+#include <system_error>
+#include <thread>
+
+#include "rtde/server.hpp"
+#include "sim/ur/ur_controller.hpp"
+
+namespace pnp::sim::cell {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Step costs kept for the statistics: the last ~8 s at 500 Hz.
+constexpr std::size_t kCostWindow = 4096;
+
+}  // namespace
+
+std::filesystem::path defaultCellFile() {
+    if (const char* env = std::getenv("PNP_CELL"); env != nullptr && *env != '\0') return env;
+    return std::filesystem::path(PNP_CELLS_DIR) / "thesis.yaml";
+}
+
+struct Simulator::Impl {
+    Impl(world::CellDescription cell, SimulatorConfig c) : config(c), world(std::move(cell)) {}
+
+    SimulatorConfig config;
+    world::World world;
+    std::vector<std::unique_ptr<ur::UrController>> controllers;
+    std::vector<std::unique_ptr<rtde::Server>> servers;
+    std::vector<DeviceEndpoint> endpoints;
+
+    std::thread thread;
+    std::atomic<bool> running{false};
+
+    mutable std::mutex snapshotMutex;
+    std::shared_ptr<const world::Snapshot> snapshot;
+
+    mutable std::mutex statsMutex;
+    StepStats stats;
+    std::vector<double> costs = std::vector<double>(kCostWindow, 0.0);
+    std::size_t costCount = 0;
+
+    void publishSnapshot() {
+        auto s = std::make_shared<const world::Snapshot>(world.snapshot());
+        std::lock_guard lock(snapshotMutex);
+        snapshot = std::move(s);
+    }
+
+    void loop() {
+        const double dt = 1.0 / config.rate;
+        const auto period = std::chrono::nanoseconds(std::llround(1e9 / config.rate));
+        const auto snapshotEvery = static_cast<std::uint64_t>(
+            std::max(1.0, std::round(config.rate / std::min(config.snapshotRate, config.rate))));
+        auto next = Clock::now() + period;
+        while (running.load(std::memory_order_relaxed)) {
+            std::this_thread::sleep_until(next);
+            const auto start = Clock::now();
+            const auto late = start - next;
+            // Fixed dt whatever the wake-up time: the world's trajectory depends only on its
+            // inputs, not on the scheduler. A step that starts late is counted; after a long
+            // stall (debugger, suspended VM) the schedule restarts instead of racing to catch up.
+            for (auto& c : controllers) c->step(dt);
+            world.step(dt);
+            for (auto& c : controllers) c->publish();
+            for (auto& s : servers) s->cycle();
+            if (world.steps() % snapshotEvery == 0) publishSnapshot();
+            const double cost = std::chrono::duration<double>(Clock::now() - start).count();
+            {
+                std::lock_guard lock(statsMutex);
+                ++stats.steps;
+                if (late > period) ++stats.overruns;
+                stats.lateMax =
+                    std::max(stats.lateMax, std::chrono::duration<double>(late).count());
+                costs[costCount % kCostWindow] = cost;
+                ++costCount;
+            }
+            next += period;
+            if (Clock::now() - next > 20 * period) next = Clock::now() + period;
+        }
+    }
+};
+
+Simulator::Simulator(world::CellDescription cell, SimulatorConfig config)
+    : impl_(std::make_unique<Impl>(std::move(cell), config)) {
+    if (!(config.rate >= 1.0 && config.rate <= 10000.0))
+        throw std::invalid_argument("simulator rate must be within 1..10000 Hz");
+    if (!(config.snapshotRate > 0.0)) throw std::invalid_argument("snapshot rate must be > 0");
+    const auto& robots = impl_->world.description().robots;
+    for (std::size_t i = 0; i < robots.size(); ++i) {
+        ur::UrControllerConfig uc;
+        uc.robot = i;
+        impl_->controllers.push_back(std::make_unique<ur::UrController>(impl_->world, uc));
+        rtde::ServerConfig sc;
+        sc.bindAddress = config.bindAddress;
+        sc.port = config.ephemeralPorts ? 0 : robots[i].controller.port;
+        // The state goes out once per world step, right after it, as a UR publishes its
+        // state once per control cycle: an adapter that answers within the cycle gets its
+        // target into the next step, every step.
+        sc.externalCycle = true;
+        sc.maxFrequency = config.rate;
+        impl_->servers.push_back(std::make_unique<rtde::Server>(sc, *impl_->controllers.back()));
+    }
+    // Outputs valid before the first step: a client that connects at once reads the home pose.
+    impl_->world.step(0.0);
+    for (auto& c : impl_->controllers) c->publish();
+    impl_->publishSnapshot();
+}
+
+Simulator::~Simulator() { stop(); }
+
+void Simulator::start() {
+    if (impl_->running) return;
+    const auto& robots = impl_->world.description().robots;
+    impl_->endpoints.clear();
+    for (std::size_t i = 0; i < impl_->servers.size(); ++i) {
+        try {
+            impl_->servers[i]->start();
+        } catch (const std::system_error& e) {
+            for (std::size_t k = 0; k < i; ++k) impl_->servers[k]->stop();
+            throw std::system_error(e.code(), "robot " + robots[i].name + ": RTDE controller on " +
+                                                  impl_->config.bindAddress + ":" +
+                                                  std::to_string(robots[i].controller.port));
+        }
+        impl_->endpoints.push_back({robots[i].name, "ur-controller", "rtde",
+                                    impl_->config.bindAddress, impl_->servers[i]->port()});
+    }
+    impl_->running = true;
+    impl_->thread = std::thread([this] { impl_->loop(); });
+}
+
+void Simulator::stop() {
+    if (!impl_->running.exchange(false)) return;
+    if (impl_->thread.joinable()) impl_->thread.join();
+    for (auto& s : impl_->servers) s->stop();
+}
+
+std::vector<DeviceEndpoint> Simulator::endpoints() const { return impl_->endpoints; }
+
+std::shared_ptr<const world::Snapshot> Simulator::snapshot() const {
+    std::lock_guard lock(impl_->snapshotMutex);
+    return impl_->snapshot;
+}
+
+const world::CellDescription& Simulator::description() const { return impl_->world.description(); }
+
+double Simulator::rate() const { return impl_->config.rate; }
+
+StepStats Simulator::stats() const {
+    std::lock_guard lock(impl_->statsMutex);
+    StepStats s = impl_->stats;
+    const std::size_t n = std::min(impl_->costCount, kCostWindow);
+    if (n > 0) {
+        std::vector<double> c(impl_->costs.begin(), impl_->costs.begin() + n);
+        auto at = [&](double q) {
+            const auto k = std::min(n - 1, static_cast<std::size_t>(q * (n - 1) + 0.5));
+            std::nth_element(c.begin(), c.begin() + k, c.end());
+            return c[k];
+        };
+        s.stepCostMedian = at(0.5);
+        s.stepCostP99 = at(0.99);
+    }
+    return s;
+}
+
+}  // namespace pnp::sim::cell

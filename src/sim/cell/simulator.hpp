@@ -1,0 +1,70 @@
+// The simulated cell's hardware in one process (`pnp sim`): the physical world, stepped at a
+// fixed rate, and the device side of every simulated device on its own real transport (for
+// now the UR controller over RTDE/TCP). The world is the ground truth; its snapshot is what
+// the ground-truth OPC UA view (ground_truth.hpp) and tests read. Adapters only ever see
+// the devices' protocols.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "world/cell_description.hpp"
+#include "world/world.hpp"
+
+namespace pnp::sim::cell {
+
+// The thesis cell (models/cells/thesis.yaml of the source tree), or $PNP_CELL when set.
+std::filesystem::path defaultCellFile();
+
+struct SimulatorConfig {
+    double rate = 500.0;                    // world steps per second (fixed dt = 1 / rate)
+    std::string bindAddress = "127.0.0.1";  // where device endpoints listen
+    bool ephemeralPorts = false;            // every device on a free port (tests, many cells)
+    double snapshotRate = 125.0;            // snapshots for readers per second (≤ rate)
+};
+
+// Where an adapter finds a simulated device.
+struct DeviceEndpoint {
+    std::string name;      // the thing in the cell file (robot name, tool name...)
+    std::string device;    // what is simulated, e.g. "ur-controller"
+    std::string protocol;  // e.g. "rtde"
+    std::string host;
+    std::uint16_t port = 0;
+};
+
+struct StepStats {
+    std::uint64_t steps = 0;
+    std::uint64_t overruns = 0;   // steps that started more than one period late
+    double stepCostMedian = 0.0;  // s of CPU-side work per step (recent window)
+    double stepCostP99 = 0.0;
+    double lateMax = 0.0;  // s, the latest a step started
+};
+
+class Simulator {
+  public:
+    Simulator(world::CellDescription cell, SimulatorConfig config = {});
+    ~Simulator();  // stop()
+    Simulator(const Simulator&) = delete;
+    Simulator& operator=(const Simulator&) = delete;
+
+    // Starts every device server, then the stepping thread. Throws std::system_error when a
+    // port is taken (the message names the device and the port).
+    void start();
+    void stop();
+
+    std::vector<DeviceEndpoint> endpoints() const;
+    // The world as of the latest snapshot (at snapshotRate).
+    std::shared_ptr<const world::Snapshot> snapshot() const;
+    const world::CellDescription& description() const;
+    StepStats stats() const;
+    double rate() const;
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace pnp::sim::cell

@@ -1,0 +1,183 @@
+// The simulated cell in process (src/sim/cell): the thesis cell's world stepped at 500 Hz,
+// its UR controller reached over RTDE on a real socket, and the ground truth read over
+// OPC UA — as an adapter and a test would see them.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+#include "rtde/client.hpp"
+#include "sim/cell/ground_truth.hpp"
+#include "sim/cell/simulator.hpp"
+#include "support/loopback_server.hpp"
+#include "ua/client/client.hpp"
+#include "ua/client/error.hpp"
+#include "ua/spatial/spatial.hpp"
+#include "ua/types/extension_object.hpp"
+#include "ua/types/status_codes.hpp"
+#include "world/cell_file.hpp"
+
+namespace {
+
+using namespace std::chrono_literals;
+using pnp::sim::cell::Simulator;
+
+pnp::world::CellDescription thesisCell() {
+    auto cell = pnp::world::loadCellFile(pnp::sim::cell::defaultCellFile());
+    EXPECT_TRUE(cell.ok()) << (cell.ok() ? "" : cell.error().message);
+    return cell.value();
+}
+
+pnp::sim::cell::SimulatorConfig testConfig() {
+    pnp::sim::cell::SimulatorConfig c;
+    c.ephemeralPorts = true;
+    return c;
+}
+
+std::vector<double> readDoubles(pnp::ua::client::Client& c, const pnp::ua::NodeId& node) {
+    auto v = c.readValue(node, 5s);
+    const auto* a = v.array<double>();
+    return a ? *a : std::vector<double>{};
+}
+
+TEST(SimCell, ServesTheUrControllerOverRtdeOnTheAddressItReports) {
+    const auto cell = thesisCell();
+    Simulator sim(cell, testConfig());
+    sim.start();
+    const auto endpoints = sim.endpoints();
+    ASSERT_EQ(endpoints.size(), 1u);
+    EXPECT_EQ(endpoints[0].name, "ur5");
+    EXPECT_EQ(endpoints[0].device, "ur-controller");
+    EXPECT_EQ(endpoints[0].protocol, "rtde");
+    ASSERT_NE(endpoints[0].port, 0);
+
+    pnp::rtde::Client rtde;
+    ASSERT_TRUE(
+        rtde.connect(endpoints[0].host, endpoints[0].port, pnp::rtde::deadlineIn(2000ms)).ok());
+    ASSERT_TRUE(rtde.negotiateProtocolVersion(pnp::rtde::deadlineIn(2000ms)).ok());
+    auto recipe =
+        rtde.setupOutputs(500.0, {"timestamp", "actual_q"}, pnp::rtde::deadlineIn(2000ms));
+    ASSERT_TRUE(recipe.ok());
+    ASSERT_TRUE(recipe->valid());
+    ASSERT_TRUE(rtde.start(pnp::rtde::deadlineIn(2000ms)).ok());
+    // 100 samples at 500 Hz: the robot stands at its home joints and the clock advances.
+    double first = -1.0, last = -1.0;
+    int samples = 0;
+    for (int i = 0; i < 1000 && samples < 100; ++i) {
+        auto r = rtde.receive(pnp::rtde::deadlineIn(1000ms));
+        ASSERT_TRUE(r.ok()) << r.status().message;
+        const auto* s = std::get_if<pnp::rtde::DataSample>(&r.value());
+        if (!s) continue;
+        ++samples;
+        const double t = std::get<double>(s->values[0]);
+        if (first < 0) first = t;
+        last = t;
+        const auto q = std::get<pnp::rtde::Vector6d>(s->values[1]);
+        for (int k = 0; k < 6; ++k) EXPECT_NEAR(q[k], cell.robots[0].home[k], 1e-12);
+    }
+    EXPECT_EQ(samples, 100);
+    EXPECT_GT(last, first);
+}
+
+TEST(SimCell, StepsAtItsFixedRate) {
+    Simulator sim(thesisCell(), testConfig());
+    sim.start();
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto s0 = sim.stats().steps;
+    std::this_thread::sleep_for(1000ms);
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const auto steps = sim.stats().steps - s0;
+    // 500 Hz on a loaded 2-core CI machine: within 10 % over one second.
+    EXPECT_NEAR(static_cast<double>(steps) / elapsed, 500.0, 50.0);
+    const auto snap = sim.snapshot();
+    ASSERT_TRUE(snap);
+    EXPECT_NEAR(snap->time, static_cast<double>(snap->step) / 500.0, 1e-9);
+}
+
+TEST(SimCell, GroundTruthIsReadOnlyOpcUa) {
+    const auto cell = thesisCell();
+    Simulator sim(cell, testConfig());
+    pnp::ua::server::Server server(pnp::testing::loopbackConfig());
+    pnp::sim::cell::GroundTruth truth(server, sim, {.rate = 100.0});
+    sim.start();
+    server.start();
+    truth.start();
+
+    pnp::ua::client::Client c;
+    c.connect(pnp::testing::url(server), pnp::ua::client::Anonymous{}, 5s);
+    const auto ns = c.namespaceIndex(pnp::sim::cell::kWorldNamespaceUri, 5s);
+    EXPECT_EQ(ns, truth.namespaceIndex());
+    const auto joints = readDoubles(c, pnp::ua::NodeId(ns, "Robots.ur5.Joints"));
+    ASSERT_EQ(joints.size(), 6u);
+    for (int k = 0; k < 6; ++k) EXPECT_NEAR(joints[k], cell.robots[0].home[k], 1e-12);
+
+    // The cube where the cell file puts it, on the table.
+    auto pose = c.readValue(pnp::ua::NodeId(ns, "Objects.cube-green.Pose"), 5s);
+    const auto* x = pose.scalar<pnp::ua::ExtensionObject>();
+    ASSERT_NE(x, nullptr);
+    auto frame = pnp::ua::fromExtensionObject<pnp::ua::ThreeDFrame>(*x);
+    ASSERT_TRUE(frame);
+    const auto* cube = cell.findObject("cube-green");
+    ASSERT_NE(cube, nullptr);
+    EXPECT_NEAR(
+        (pnp::ua::spatial::toIsometry(*frame).translation() - cube->pose.translation()).norm(), 0.0,
+        1e-12);
+    auto holder = c.readValue(pnp::ua::NodeId(ns, "Objects.cube-green.Holder"), 5s);
+    ASSERT_NE(holder.scalar<std::string>(), nullptr);
+    EXPECT_EQ(*holder.scalar<std::string>(), cube->on.value_or(""));
+
+    // Time advances; nobody may write the truth.
+    const auto time1 = c.readValue(pnp::ua::NodeId(ns, "World.Time"), 5s);
+    std::this_thread::sleep_for(100ms);
+    const auto time2 = c.readValue(pnp::ua::NodeId(ns, "World.Time"), 5s);
+    ASSERT_NE(time1.scalar<double>(), nullptr);
+    ASSERT_NE(time2.scalar<double>(), nullptr);
+    EXPECT_GT(*time2.scalar<double>(), *time1.scalar<double>());
+    const auto status = c.writeValue(pnp::ua::NodeId(ns, "Robots.ur5.Joints"),
+                                     pnp::ua::Variant(std::vector<double>(6, 0.0)), 5s);
+    EXPECT_EQ(status, pnp::ua::status::BadNotWritable);
+    EXPECT_EQ(readDoubles(c, pnp::ua::NodeId(ns, "Robots.ur5.Joints")), joints);
+}
+
+TEST(SimCell, ServoTargetsOverRtdeMoveTheWorldsRobot) {
+    const auto cell = thesisCell();
+    Simulator sim(cell, testConfig());
+    sim.start();
+    const auto ep = sim.endpoints().at(0);
+    pnp::rtde::Client rtde;
+    ASSERT_TRUE(rtde.connect(ep.host, ep.port, pnp::rtde::deadlineIn(2000ms)).ok());
+    ASSERT_TRUE(rtde.negotiateProtocolVersion(pnp::rtde::deadlineIn(2000ms)).ok());
+    auto in = rtde.setupInputs(
+        {"input_int_register_0", "input_double_register_0", "input_double_register_1",
+         "input_double_register_2", "input_double_register_3", "input_double_register_4",
+         "input_double_register_5"},
+        pnp::rtde::deadlineIn(2000ms));
+    ASSERT_TRUE(in.ok());
+    ASSERT_TRUE(in->valid());
+    auto out = rtde.setupOutputs(500.0, {"actual_q"}, pnp::rtde::deadlineIn(2000ms));
+    ASSERT_TRUE(out.ok() && out->valid());
+    ASSERT_TRUE(rtde.start(pnp::rtde::deadlineIn(2000ms)).ok());
+    // Stream a target 0.1 rad away on the base joint, in small steps (the servo loop's way).
+    auto home = cell.robots[0].home;
+    double q0 = 0.0;
+    for (int i = 0; i < 2000; ++i) {
+        auto r = rtde.receive(pnp::rtde::deadlineIn(1000ms));
+        ASSERT_TRUE(r.ok()) << r.status().message;
+        const auto* s = std::get_if<pnp::rtde::DataSample>(&r.value());
+        if (!s) continue;
+        q0 = std::get<pnp::rtde::Vector6d>(s->values[0])[0];
+        const double target = home[0] + std::min(0.1, 0.0005 * i);
+        std::vector<pnp::rtde::Value> values{std::int32_t{1}};
+        for (int k = 0; k < 6; ++k) values.emplace_back(k == 0 ? target : home[k]);
+        ASSERT_TRUE(rtde.send(in->id, values, pnp::rtde::deadlineIn(1000ms)).ok());
+        if (std::abs(q0 - (home[0] + 0.1)) < 1e-6) break;
+    }
+    EXPECT_NEAR(q0, home[0] + 0.1, 1e-6);
+    std::this_thread::sleep_for(50ms);  // snapshots are taken at 125 Hz
+    const auto snap = sim.snapshot();
+    EXPECT_NEAR(snap->robots.at(0).q[0], home[0] + 0.1, 1e-4);
+}
+
+}  // namespace
