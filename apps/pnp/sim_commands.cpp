@@ -102,8 +102,8 @@ int runSim(SimOptions& o) {
     const auto stats = simulator.stats();
     std::cerr << "pnp sim: " << (sig == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping after "
               << stats.steps << " steps (" << stats.overruns << " late; step cost median "
-              << stats.stepCostMedian * 1e6 << " us, p99 " << stats.stepCostP99 * 1e6 << " us)"
-              << std::endl;
+              << stats.stepCostMedian * 1e6 << " us, p99 " << stats.stepCostP99 * 1e6 << " us; "
+              << (stats.realtime ? "real-time" : "normal") << " scheduling)" << std::endl;
     discovery.reset();
     truth.stop();
     server.stop();

@@ -16,6 +16,10 @@
 namespace pnp::robot {
 namespace {
 
+// Cycles a trajectory may advance by at once (samples the loop did not get); a bigger gap in
+// the controller's time is a restart or a stall, and counts as one cycle.
+constexpr double kMaxCatchUpCycles = 4.0;
+
 constexpr double kStartTolerance = 1e-3;     // rad: a trajectory must start where the robot is
 constexpr std::size_t kStatsWindow = 30000;  // samples: one minute at 500 Hz
 // stop() lets a running motion brake to rest for at most this long.
@@ -315,6 +319,7 @@ struct Controller::Impl {
     Joints held{};
     bool haveHeld = false;
     std::optional<Clock::time_point> lastReceived;
+    std::optional<double> lastControllerTime;
 
     void run(std::stop_token stop);
     void cycle(const State& state);
@@ -342,6 +347,7 @@ void Controller::Impl::linkLost(const std::string& why) {
     hw.disconnect();
     connected.store(false);
     lastReceived.reset();
+    lastControllerTime.reset();
     haveHeld = false;
     std::lock_guard lock(mutex);
     ++linkLosses;
@@ -364,6 +370,14 @@ void Controller::Impl::cycle(const State& state) {
     }
     if (first) wakeCv.notify_all();
     lastReceived = state.received;
+    // The time the controller moved on since the last sample: normally one cycle; two when a
+    // sample did not reach us (the controller went on through that cycle, see README).
+    double dt = hw.cycleTime();
+    if (lastControllerTime) {
+        const double d = state.controllerTime - *lastControllerTime;
+        if (d > 0.0 && d <= kMaxCatchUpCycles * dt) dt = d;
+    }
+    lastControllerTime = state.controllerTime;
     if (!haveHeld) {
         held = state.q;
         haveHeld = true;
@@ -381,7 +395,7 @@ void Controller::Impl::cycle(const State& state) {
     }
     if (active) {
         Joints q;
-        const bool ended = active->step(state, hw.cycleTime(), q);
+        const bool ended = active->step(state, dt, q);
         command = Command{true, q};
         held = q;
         if (ended) active.reset();

@@ -5,6 +5,8 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
+#include <pthread.h>
+#include <sched.h>
 #include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -230,6 +232,12 @@ ServerStats Server::stats() const {
 }
 
 void Server::Impl::run() {
+    if (config.realtimePriority > 0) {
+        sched_param param{};
+        param.sched_priority = std::min(config.realtimePriority, 99);
+        // Not permitted (no CAP_SYS_NICE / RLIMIT_RTPRIO): normal scheduling, as before.
+        [[maybe_unused]] int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
+    }
     std::vector<pollfd> fds;
     std::vector<std::uint64_t> ids;
     while (!stopping) {

@@ -67,6 +67,9 @@ struct ServerConfig {
     // at maxFrequency), as a real controller publishes its state once per cycle, instead of
     // on the server's own clock. A recipe at maxFrequency / N gets every Nth cycle.
     bool externalCycle = false;
+    // SCHED_FIFO priority of the network thread (1..99; 0 = normal scheduling), as a
+    // controller's real-time communication; kept at normal scheduling where not permitted.
+    int realtimePriority = 0;
     // Told why a connection was dropped (malformed package, overflow); network thread.
     std::function<void(std::string_view)> log;
 };

@@ -172,7 +172,9 @@ TEST(SimCell, ServoTargetsOverRtdeMoveTheWorldsRobot) {
         std::vector<pnp::rtde::Value> values{std::int32_t{1}};
         for (int k = 0; k < 6; ++k) values.emplace_back(k == 0 ? target : home[k]);
         ASSERT_TRUE(rtde.send(in->id, values, pnp::rtde::deadlineIn(1000ms)).ok());
-        if (std::abs(q0 - (home[0] + 0.1)) < 1e-6) break;
+        // The ramp stops dead at 0.25 rad/s: the robot may pass the end and come back; hold
+        // the end for 150 more cycles before looking.
+        if (i >= 200 + 150) break;
     }
     EXPECT_NEAR(q0, home[0] + 0.1, 1e-6);
     std::this_thread::sleep_for(50ms);  // snapshots are taken at 125 Hz

@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -76,8 +77,13 @@ struct Sample {
 // watchdog counts simulated time, so a burst would look like silence).
 class Stepper {
   public:
-    Stepper(world::World& world, UrController& controller, std::size_t maxSteps = 20000)
-        : world_(world), controller_(controller), maxSteps_(maxSteps) {
+    // afterStep: e.g. the RTDE server's cycle() (externalCycle), after each publish().
+    Stepper(world::World& world, UrController& controller, std::size_t maxSteps = 20000,
+            std::function<void()> afterStep = {})
+        : world_(world),
+          controller_(controller),
+          maxSteps_(maxSteps),
+          afterStep_(std::move(afterStep)) {
         thread_ = std::thread([this] { run(); });
     }
     ~Stepper() { stop(); }
@@ -113,6 +119,7 @@ class Stepper {
             controller_.step(kDt);
             world_.step(kDt);
             controller_.publish();
+            if (afterStep_) afterStep_();
             const world::RobotState& r = world_.robot(0);
             {
                 std::lock_guard lock(mutex_);
@@ -127,6 +134,7 @@ class Stepper {
     world::World& world_;
     UrController& controller_;
     const std::size_t maxSteps_;
+    std::function<void()> afterStep_;
     std::atomic<bool> stop_{false};
     mutable std::mutex mutex_;
     std::vector<Sample> samples_;
@@ -140,7 +148,7 @@ inline const std::vector<std::string> kOutputs = {
 inline const std::vector<std::string> kInputs = {
     "input_int_register_0",    "input_double_register_0", "input_double_register_1",
     "input_double_register_2", "input_double_register_3", "input_double_register_4",
-    "input_double_register_5"};
+    "input_double_register_5", "input_double_register_6"};
 
 // An RTDE client as the adapter uses it: outputs at 500 Hz, the servo program's inputs.
 class Session {
@@ -162,9 +170,12 @@ class Session {
         return true;
     }
 
+    // Stamped with the timestamp of the last sample taken (input_double_register_6), as
+    // the adapter answers each state.
     bool send(std::int32_t mode, const Joints& targets) {
         std::vector<rtde::Value> values{mode};
         for (double t : targets) values.emplace_back(t);
+        values.emplace_back(answering_);
         return client_.send(inputs_.id, values, rtde::deadlineIn(1000ms)).ok();
     }
 
@@ -174,7 +185,10 @@ class Session {
         for (int i = 0; i < 1000; ++i) {
             auto r = client_.receive(end);
             if (!r.ok()) return std::nullopt;
-            if (auto* d = std::get_if<rtde::DataSample>(&r.value())) return std::move(*d);
+            if (auto* d = std::get_if<rtde::DataSample>(&r.value())) {
+                answering_ = get<double>(*d, "timestamp");
+                return std::move(*d);
+            }
         }
         return std::nullopt;
     }
@@ -186,7 +200,10 @@ class Session {
         for (int i = 0; i < 200000; ++i) {
             auto r = client_.receive(newest ? rtde::Clock::now() : end);
             if (!r.ok()) break;
-            if (auto* d = std::get_if<rtde::DataSample>(&r.value())) newest = std::move(*d);
+            if (auto* d = std::get_if<rtde::DataSample>(&r.value())) {
+                answering_ = get<double>(*d, "timestamp");
+                newest = std::move(*d);
+            }
         }
         return newest;
     }
@@ -203,6 +220,7 @@ class Session {
         return false;
     }
     rtde::Client client_;
+    double answering_ = 0.0;
     rtde::Recipe outputs_;
     rtde::Recipe inputs_;
 };

@@ -22,6 +22,7 @@ rtde::ServerConfig loopback() {
     rtde::ServerConfig c;
     c.bindAddress = "127.0.0.1";
     c.port = 0;
+    c.externalCycle = true;  // as pnp sim: the state goes out after every step
     return c;
 }
 
@@ -36,7 +37,7 @@ struct Cell {
             amax[j] = 4 * limits[j].maxAcceleration;
         }
         server.start();
-        stepper.emplace(world, ur);
+        stepper.emplace(world, ur, 20000, [this] { server.cycle(); });
     }
     Joints home() const { return world.description().robots[0].home; }
 
@@ -78,14 +79,17 @@ template <class Targets>
 bool stream(Session& session, std::int32_t mode, std::chrono::milliseconds duration,
             Targets targets) {
     const auto start = Clock::now();
+    double t0 = -1.0;
     for (int i = 0; i < 100000; ++i) {
-        // The stream's own time: one cycle per published state, as the adapter's loop keeps
-        // it (wall-clock time would make an uneven, infeasible stream out of a smooth one).
-        const double t = 0.002 * i;
+        // One target per published state, as the adapter's control loop streams, for the
+        // controller's time of that state (wall-clock time would make an uneven, infeasible
+        // stream out of a smooth one), stamped with it.
+        const auto sample = session.next(100ms);
+        if (!sample) return false;
+        const double now = Session::get<double>(*sample, "timestamp");
+        if (t0 < 0.0) t0 = now;
         if (Clock::now() - start >= duration) return true;
-        if (!session.send(mode, targets(t))) return false;
-        // One target per published state, as the adapter's control loop streams.
-        if (!session.next(100ms)) return false;
+        if (!session.send(mode, targets(now - t0))) return false;
     }
     return true;
 }
@@ -272,10 +276,11 @@ TEST(UrRtde, ProtectiveStopWhenTheTcpIsDrivenIntoTheTable) {
     bool stopped = false;
     for (int i = 0; i < 5000 && !stopped; ++i) {
         ASSERT_LT(Clock::now() - begin, 20s);
-        const double t = static_cast<double>(cell.stepper->count()) * kDt;
-        ASSERT_TRUE(session.send(1, down(t)));
+        // One target per published state, for (and stamped with) its time.
+        const auto sample = session.next(100ms);
+        ASSERT_TRUE(sample.has_value());
+        ASSERT_TRUE(session.send(1, down(Session::get<double>(*sample, "timestamp"))));
         stopped = cell.ur.protectiveStop();
-        std::this_thread::sleep_for(2ms);
     }
     ASSERT_TRUE(stopped);
     // Reported over RTDE: safety mode 3, the contact force in the base frame.

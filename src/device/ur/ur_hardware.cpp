@@ -42,7 +42,7 @@ const std::vector<std::string>& inputNames() {
     static const std::vector<std::string> names{
         "input_int_register_0",    "input_double_register_0", "input_double_register_1",
         "input_double_register_2", "input_double_register_3", "input_double_register_4",
-        "input_double_register_5"};
+        "input_double_register_5", "input_double_register_6"};
     return names;
 }
 
@@ -268,6 +268,7 @@ robot::Result<robot::State> UrHardware::read(robot::Deadline deadline) {
         robot::State s;
         s.received = robot::Clock::now();
         s.controllerTime = *timestamp;
+        answering_ = *timestamp;
         s.sequence = ++sequence_;
         s.q = *q;
         s.qd = *qd;
@@ -288,7 +289,7 @@ robot::Result<robot::Done> UrHardware::write(const robot::Command& command,
                                              robot::Deadline deadline) {
     if (!client_.connected() || inputRecipe_ == 0)
         return Error{"not connected to the UR controller at " + endpoint()};
-    std::array<rtde::Value, 7> values;
+    std::array<rtde::Value, 8> values;
     values[0] = static_cast<std::int32_t>(command.servo ? 1 : 0);
     for (std::size_t i = 0; i < command.q.size(); ++i) {
         // A non-finite target must never reach servoj; refusing ends the session, and the
@@ -298,6 +299,10 @@ robot::Result<robot::Done> UrHardware::write(const robot::Command& command,
                          ")"};
         values[i + 1] = std::isfinite(command.q[i]) ? command.q[i] : 0.0;
     }
+    // The controller time of the state this command answers: a servo program can then tell a
+    // late target from a current one (pnp_servo.script and the simulator apply it a fixed
+    // number of cycles after that state; a real UR servoj ignores it).
+    values[7] = answering_;
     if (auto s = client_.send(inputRecipe_, values, deadline); !s.ok()) return fail("RTDE send", s);
     return robot::Done{};
 }

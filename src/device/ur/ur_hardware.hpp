@@ -74,6 +74,7 @@ class UrHardware final : public robot::HardwareInterface {
     std::uint8_t outputRecipe_ = 0;
     std::uint8_t inputRecipe_ = 0;
     std::uint64_t sequence_ = 0;
+    double answering_ = 0.0;  // timestamp of the last state read (input_double_register_6)
     std::string lastText_;
 };
 

@@ -40,7 +40,8 @@ struct StepStats {
     std::uint64_t overruns = 0;   // steps that started more than one period late
     double stepCostMedian = 0.0;  // s of CPU-side work per step (recent window)
     double stepCostP99 = 0.0;
-    double lateMax = 0.0;  // s, the latest a step started
+    double lateMax = 0.0;   // s, the latest a step started
+    bool realtime = false;  // the stepping thread got SCHED_FIFO
 };
 
 class Simulator {

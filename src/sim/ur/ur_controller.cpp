@@ -19,6 +19,8 @@ constexpr std::size_t kAxes = static_cast<std::size_t>(kinematics::kAxes);
 // at 500 Hz of latency, and as much lateness of the adapter absorbed), and at most.
 constexpr std::size_t kBufferDepth = 2;
 constexpr std::size_t kMaxBuffered = 6;
+// The adapter writes the timestamp of the state each target answers here (see latch()).
+constexpr std::string_view kStampRegister = "input_double_register_6";
 // Steps without a new target that a stream is carried across (see servo()).
 constexpr int kBridgeSteps = 2;
 
@@ -109,6 +111,7 @@ void UrController::write(std::string_view name, const rtde::Value& value) {
     it->second = value;
     ++inputWrites_;
     if (name == kModeRegister && std::get<std::int32_t>(value) == 0) zeroSeen_ = true;
+    if (name == kStampRegister) stampWritten_ = true;
 }
 
 bool UrController::setOutputRegister(std::string_view name, const rtde::Value& value) {
@@ -129,15 +132,21 @@ std::optional<rtde::Value> UrController::input(std::string_view name) const {
 void UrController::endInputPackage() {
     std::lock_guard lock(mutex_);
     packaged_ = true;
-    world::Joints t{};
+    Package p;
     for (std::size_t j = 0; j < kAxes; ++j)
-        t[j] = std::get<double>(inputs_.find("input_double_register_" + std::to_string(j))->second);
-    packages_.push_back(t);
+        p.targets[j] =
+            std::get<double>(inputs_.find("input_double_register_" + std::to_string(j))->second);
+    if (std::exchange(stampWritten_, false) && dt_ > 0.0) {
+        const double stamp = std::get<double>(inputs_.find(kStampRegister)->second);
+        if (std::isfinite(stamp) && stamp >= 0.0 && stamp / dt_ < 1e15)
+            p.answers = static_cast<std::uint64_t>(std::llround(stamp / dt_));
+    }
+    packages_.push_back(p);
     // Bounded latency: a client that sends faster than we step loses its oldest targets.
     while (packages_.size() > kMaxBuffered) packages_.pop_front();
 }
 
-UrController::Inputs UrController::latch() {
+UrController::Inputs UrController::latch(double dt) {
     std::lock_guard lock(mutex_);
     Inputs in;
     in.mode = std::get<std::int32_t>(inputs_.find(kModeRegister)->second);
@@ -158,13 +167,29 @@ UrController::Inputs UrController::latch() {
             packages_.clear();
             primed_ = false;
         }
-        if (!primed_ && packages_.size() >= kBufferDepth) primed_ = true;
-        in.target = primed_ && !packages_.empty();
-        if (in.target) {
-            in.targets = packages_.front();
-            packages_.pop_front();
+        dt_ = dt;
+        if (!packages_.empty() && packages_.front().answers) {
+            // Stamped targets: the answer to the state after step n is followed in step
+            // n + kBufferDepth, whenever it arrived before; a later one is dropped (the robot
+            // coasted through that step), so a late answer never shifts the stream.
+            const std::uint64_t done = world_.steps();  // this step is done + 1
+            const std::uint64_t due = done + 1 >= kBufferDepth ? done + 1 - kBufferDepth : 0;
+            while (!packages_.empty() && packages_.front().answers &&
+                   *packages_.front().answers < due) {
+                packages_.pop_front();
+                ++lateTargets_;
+            }
+            in.target = !packages_.empty() && packages_.front().answers &&
+                        *packages_.front().answers == due;
         } else {
-            primed_ = false;  // ran dry: fill up again before following on
+            // Unstamped: in order of arrival, kBufferDepth behind.
+            if (!primed_ && packages_.size() >= kBufferDepth) primed_ = true;
+            in.target = primed_ && !packages_.empty();
+            if (!in.target) primed_ = false;  // ran dry: fill up again before following on
+        }
+        if (in.target) {
+            in.targets = packages_.front().targets;
+            packages_.pop_front();
         }
     }
     return in;
@@ -173,7 +198,7 @@ UrController::Inputs UrController::latch() {
 void UrController::step(double dt) {
     // No time passes for a bad dt: nothing moves (and the watchdog does not count it).
     if (!std::isfinite(dt) || dt <= 0.0) return;
-    const Inputs in = latch();
+    const Inputs in = latch(dt);
     servo(in, dt);
     std::lock_guard lock(mutex_);
     followingShared_ = following_;
@@ -378,6 +403,11 @@ void UrController::publish() {
     outputs_["safety_mode"] = stopped ? kSafetyProtectiveStop : kSafetyNormal;
     outputs_["safety_status"] = stopped ? kSafetyProtectiveStop : kSafetyNormal;
     outputs_["safety_status_bits"] = stopped ? kSafetyBitProtectiveStop : kSafetyBitNormal;
+}
+
+std::uint64_t UrController::lateTargets() const {
+    std::lock_guard lock(mutex_);
+    return lateTargets_;
 }
 
 std::uint64_t UrController::starvedSteps() const {

@@ -62,6 +62,8 @@ class UrController : public rtde::ControllerState {
     // Steps in which a followed stream had no target ready (the client was later than the
     // jitter buffer holds): the robot coasted on, then braked.
     std::uint64_t starvedSteps() const;
+    // Stamped targets that came after their step (dropped).
+    std::uint64_t lateTargets() const;
     // What a URScript program would write (write_output_*_register): sets an output register
     // (output_int_register_N, output_double_register_N, output_bit_register_N,
     // output_bit_registers*); false for any other name or a value of the wrong type.
@@ -78,7 +80,7 @@ class UrController : public rtde::ControllerState {
         bool zeroSeen = false;     // register 0 written as 0 since the last latch
         bool target = false;       // targets holds a new target for this step
     };
-    Inputs latch();
+    Inputs latch(double dt);
     void servo(const Inputs& in, double dt);
 
     world::World& world_;
@@ -91,7 +93,16 @@ class UrController : public rtde::ControllerState {
     std::uint64_t inputWrites_ = 0;
     // Joint targets of whole input packages, oldest first: each step takes one (see
     // endInputPackage()). Empty and unused until the first package boundary is seen.
-    std::deque<world::Joints> packages_;
+    struct Package {
+        world::Joints targets{};
+        // The state it answers (input_double_register_6 = that state's timestamp, in steps):
+        // applied kBufferDepth steps after that state, dropped when later. None: in order.
+        std::optional<std::uint64_t> answers;
+    };
+    std::deque<Package> packages_;
+    bool stampWritten_ = false;  // input_double_register_6 written in the current package
+    std::uint64_t lateTargets_ = 0;
+    double dt_ = 0.0;        // of the last step (timestamps -> steps)
     bool packaged_ = false;  // package boundaries are known (a real RTDE server feeds us)
     bool primed_ = false;    // the buffer filled up to its depth since it last ran dry
     bool flush_ = false;     // the servo stopped following: drop what is buffered
