@@ -10,13 +10,17 @@
 //       median of 50, next to the RTDE round trip (output sample -> input seen) measured
 //       the same way;
 //   (d) halt() -> the first commanded target at which the acceleration drops;
-//   (e) the simulator's CPU: its stepping thread's CPU time per wall second (% of a core),
-//       with the adapter streaming at 500 Hz;
+//   (e) the CPU of a `pnp sim` process (stepping, RTDE, ground-truth server) per wall
+//       second, % of a core, with an adapter streaming at 500 Hz, next to a bare 500 Hz sleep
+//       loop's; (b) is measured on that adapter's loop;
 //   (f) a JointPtpMove skill's Start call over OPC UA -> the first moving target at the
 //       controller, next to a Read round trip of the same client.
 // Usage: pnp_bench_robot [--seconds N]
 #include <pthread.h>
+#include <signal.h>
+#include <sys/wait.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -35,6 +39,7 @@
 #include "robot/controller.hpp"
 #include "robot/planner.hpp"
 #include "rtde/server.hpp"
+#include "sim/cell/simulator.hpp"
 #include "sim/ur/ur_controller.hpp"
 #include "skill/client/skill_client.hpp"
 #include "ua/client/client.hpp"
@@ -63,79 +68,51 @@ double quantile(std::vector<double> v, double q) {
     return v[k];
 }
 
-// The simulated cell's robot, as `pnp sim` runs it, with a hook on every step.
+// The simulated cell in process (as `pnp sim` runs it), with a hook on every world step.
 class Cell {
   public:
-    explicit Cell(pnp::world::CellDescription cell)
-        : world_(std::move(cell)), controller_(world_, {}), server_(config(), controller_) {
-        world_.step(0.0);
-        controller_.publish();
-    }
-    ~Cell() { stop(); }
-
-    void start() {
-        server_.start();
-        running_ = true;
-        thread_ = std::thread([this] { loop(); });
-    }
-    void stop() {
-        if (!running_.exchange(false)) return;
-        thread_.join();
-        server_.stop();
-    }
-    std::uint16_t port() const { return server_.port(); }
-    pnp::sim::ur::UrController& controller() { return controller_; }
-    const pnp::world::World& world() const { return world_; }
-    double cpuSeconds() { return threadCpuSeconds(thread_.native_handle()); }
-
-    // Called on the stepping thread after every step.
+    explicit Cell(pnp::world::CellDescription cell) : sim_(std::move(cell), config(this)) {}
+    void start() { sim_.start(); }
+    void stop() { sim_.stop(); }
+    std::uint16_t port() const { return sim_.endpoints().at(0).port; }
+    const pnp::sim::ur::UrController& controller() const { return sim_.urController(0); }
+    // At rest only (a snapshot, up to 8 ms old).
+    Eigen::Isometry3d tcp() const { return sim_.snapshot()->robots.at(0).tcp; }
     void onStep(std::function<void(const pnp::world::World&)> f) {
         std::lock_guard lock(hookMutex_);
         hook_ = std::move(f);
     }
 
   private:
-    static pnp::rtde::ServerConfig config() {
-        pnp::rtde::ServerConfig c;
-        c.bindAddress = "127.0.0.1";
-        c.port = 0;
-        c.externalCycle = true;  // as pnp sim: the state published after every step
-        c.realtimePriority = 40;
+    static pnp::sim::cell::SimulatorConfig config(Cell* self) {
+        pnp::sim::cell::SimulatorConfig c;
+        c.ephemeralPorts = true;
+        c.onStep = [self](const pnp::world::World& w) {
+            std::lock_guard lock(self->hookMutex_);
+            if (self->hook_) self->hook_(w);
+        };
         return c;
     }
-    void loop() {
-        sched_param param{};
-        param.sched_priority = 40;  // as pnp sim, where permitted
-        pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
-        constexpr double kDt = 0.002;
-        const auto period = microseconds(2000);
-        auto next = Clock::now() + period;
-        while (running_) {
-            std::this_thread::sleep_until(next);
-            controller_.step(kDt);
-            world_.step(kDt);
-            controller_.publish();
-            server_.cycle();
-            {
-                std::lock_guard lock(hookMutex_);
-                if (hook_) hook_(world_);
-            }
-            next += period;
-            // A step that ran late is not made up by a burst of steps: the adapters answer
-            // each published state within its cycle, and a burst would leave them behind.
-            // The world's time then runs a little slower than the wall clock, in step.
-            if (const auto now = Clock::now(); now > next) next = now + period / 2;
-        }
-    }
-
-    pnp::world::World world_;
-    pnp::sim::ur::UrController controller_;
-    pnp::rtde::Server server_;
-    std::thread thread_;
-    std::atomic<bool> running_{false};
     std::mutex hookMutex_;
     std::function<void(const pnp::world::World&)> hook_;
+    pnp::sim::cell::Simulator sim_;
 };
+
+// CPU seconds (user + system) of a process so far, from /proc.
+double processCpuSeconds(pid_t pid) {
+    std::FILE* f = std::fopen(("/proc/" + std::to_string(pid) + "/stat").c_str(), "r");
+    if (!f) return 0.0;
+    char buf[4096];
+    const std::size_t n = std::fread(buf, 1, sizeof buf - 1, f);
+    std::fclose(f);
+    buf[n] = 0;
+    const char* p = std::strrchr(buf, ')');  // the command name may hold spaces
+    if (!p) return 0.0;
+    unsigned long utime = 0, stime = 0;
+    // Fields after the name: state(3) ... utime(14) stime(15).
+    std::sscanf(p + 2, "%*c %*d %*d %*d %*d %*d %*u %*u %*u %*u %*u %lu %lu", &utime, &stime);
+    return static_cast<double>(utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
 
 double segmentDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
                        const Eigen::Vector3d& b) {
@@ -233,7 +210,7 @@ int main(int argc, char** argv) {
     });
     auto endError = [&](const Eigen::Vector3d& goal) {
         std::this_thread::sleep_for(20ms);
-        return (cell.world().robot(0).tcp.translation() - goal).norm();  // at rest: no race
+        return (cell.tcp().translation() - goal).norm();
     };
     pnp::robot::CartesianTarget t;
     t.pose = downAt(corners[0]);
@@ -367,12 +344,58 @@ int main(int argc, char** argv) {
                 quantile(skillLatency, 0.5), quantile(readRtt, 0.5),
                 quantile(skillLatency, 0.5) / std::max(1e-9, quantile(readRtt, 0.5)));
 
-    // (b) + (e): the loop holding the robot for `seconds`, the simulator's CPU meanwhile.
-    const double cpu0 = cell.cpuSeconds();
+    controller.stop();
+    cell.stop();
+
+    // (b) + (e): `pnp sim` as a process, as a user runs it, with a fresh adapter loop holding
+    // the robot for `seconds` (streaming at 500 Hz): the loop's period error and the whole
+    // simulator process's CPU (stepping, RTDE, the ground truth's OPC UA server).
+    int toChild[2];
+    if (::pipe(toChild) != 0) return 1;
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        ::dup2(toChild[1], STDOUT_FILENO);
+        ::close(toChild[0]);
+        ::execl(PNP_BENCH_PNP_EXE, PNP_BENCH_PNP_EXE, "sim", "--ephemeral-ports", "--port", "0",
+                "--no-register", static_cast<char*>(nullptr));
+        ::_exit(127);
+    }
+    ::close(toChild[1]);
+    std::string jsonLine;
+    {
+        char ch = 0;
+        while (::read(toChild[0], &ch, 1) == 1 && ch != '\n' && jsonLine.size() < 65536)
+            jsonLine += ch;
+    }
+    const auto addressAt = jsonLine.find("\"address\":\"");
+    if (addressAt == std::string::npos) {
+        std::fprintf(stderr, "pnp sim printed no device address: %s\n", jsonLine.c_str());
+        ::kill(pid, SIGTERM);
+        ::waitpid(pid, nullptr, 0);
+        return 1;
+    }
+    const std::string address =
+        jsonLine.substr(addressAt + 11, jsonLine.find('"', addressAt + 11) - (addressAt + 11));
+    pnp::device::ur::UrConfig pc2 = uc;
+    pc2.port = static_cast<std::uint16_t>(std::stoi(address.substr(address.rfind(':') + 1)));
+    pnp::device::ur::UrHardware simHardware(pc2);
+    pnp::robot::Controller simController(simHardware, cc);
+    if (auto st = simController.start(Clock::now() + 5s); !st) {
+        std::fprintf(stderr, "controller on pnp sim: %s\n", st.error().message.c_str());
+        ::kill(pid, SIGTERM);
+        ::waitpid(pid, nullptr, 0);
+        return 1;
+    }
+    std::this_thread::sleep_for(500ms);
+    const double cpu0 = processCpuSeconds(pid);
     const auto w0 = Clock::now();
     std::this_thread::sleep_for(std::chrono::seconds(seconds));
-    const double simCpu = (cell.cpuSeconds() - cpu0) / duration<double>(Clock::now() - w0).count();
-    const auto stats = controller.stats();
+    const double simCpu =
+        (processCpuSeconds(pid) - cpu0) / duration<double>(Clock::now() - w0).count();
+    const auto stats = simController.stats();
+    simController.stop();
+    ::kill(pid, SIGTERM);
+    ::waitpid(pid, nullptr, 0);
     // Baseline: a plain thread sleeping to absolute 2 ms deadlines, for as long (at most 10 s).
     std::vector<double> baseErr;
     double baseCpu = 0.0;
@@ -405,9 +428,7 @@ int main(int argc, char** argv) {
                 stats.realtime ? "yes" : "no");
     std::printf("%-52s %12zu\n", "(b) loop periods in the window",
                 static_cast<std::size_t>(stats.window));
-    std::printf("%-52s %12.2f %12.2f %8.2f\n", "(e) simulator stepping thread, % of a core",
+    std::printf("%-52s %12.2f %12.2f %8.2f\n", "(e) pnp sim process (500 Hz), % of a core",
                 simCpu * 100.0, baseCpu * 100.0, simCpu / std::max(1e-9, baseCpu));
-    controller.stop();
-    cell.stop();
     return 0;
 }

@@ -120,6 +120,9 @@ struct Server::Impl {
     std::vector<TextMessage> pendingTexts;
 
     std::atomic<std::uint64_t> cycles{0};  // Server::cycle() calls (externalCycle)
+    // The connections, between the network thread (all but its ppoll) and cycle().
+    std::mutex netMutex;
+    std::atomic<bool> streaming{false};  // a started connection has an output recipe
     std::atomic<std::size_t> clientCount{0};
     std::atomic<std::uint64_t> sent{0};
     std::atomic<std::uint64_t> skipped{0};
@@ -194,6 +197,8 @@ void Server::stop() {
     std::uint64_t one = 1;
     [[maybe_unused]] auto n = ::write(d.wakeFd, &one, sizeof one);
     d.thread.join();
+    std::lock_guard lock(d.netMutex);
+    d.streaming = false;
     for (auto& [id, c] : d.connections) ::close(c.fd);
     d.connections.clear();
     d.inputOwners.clear();
@@ -220,6 +225,23 @@ void Server::sendText(const TextMessage& message) {
 void Server::cycle() {
     Impl& d = *impl_;
     d.cycles.fetch_add(1);
+    if (!d.streaming.load()) return;  // nobody to send to: no wake-up either
+    // The caller (the controller's cycle) sends the samples itself when the network thread
+    // is idle: no thread switch per cycle, which on a virtual machine costs more than the
+    // sending. Busy (or a send that could not finish): the network thread does it.
+    {
+        std::unique_lock lock(d.netMutex, std::try_to_lock);
+        if (lock.owns_lock()) {
+            bool pending = false;
+            const auto now = Clock::now();
+            for (auto& [id, c] : d.connections) {
+                if (!c.closed && c.started) d.stream(c, now);
+                if (!c.closed && c.queued() > 0) d.flush(c);
+                pending = pending || c.closed || c.queued() > 0;
+            }
+            if (!pending) return;
+        }
+    }
     if (d.wakeFd >= 0) {
         std::uint64_t one = 1;
         [[maybe_unused]] auto n = ::write(d.wakeFd, &one, sizeof one);
@@ -240,6 +262,7 @@ void Server::Impl::run() {
     }
     std::vector<pollfd> fds;
     std::vector<std::uint64_t> ids;
+    std::unique_lock lock(netMutex);
     while (!stopping) {
         // Sleep until the earliest sample deadline of any started connection.
         std::optional<Clock::time_point> wake;
@@ -268,7 +291,9 @@ void Server::Impl::run() {
             ts.tv_nsec = static_cast<long>(ns % 1'000'000'000);
             timeout = &ts;
         }
+        lock.unlock();
         int n = ::ppoll(fds.data(), fds.size(), timeout, nullptr);
+        lock.lock();
         if (n < 0 && errno != EINTR) break;  // cannot happen with valid fds; do not spin
         if (stopping) break;
 
@@ -307,6 +332,9 @@ void Server::Impl::run() {
             }
         }
         clientCount = connections.size();
+        bool any = false;
+        for (auto& [id, c] : connections) any = any || (c.started && !c.outputs.empty());
+        streaming = any;
     }
 }
 

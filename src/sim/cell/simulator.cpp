@@ -84,6 +84,7 @@ struct Simulator::Impl {
             world.step(dt);
             for (auto& c : controllers) c->publish();
             for (auto& s : servers) s->cycle();
+            if (config.onStep) config.onStep(world);
             if (world.steps() % snapshotEvery == 0) publishSnapshot();
             const double cost = std::chrono::duration<double>(Clock::now() - start).count();
             {
@@ -169,6 +170,10 @@ std::shared_ptr<const world::Snapshot> Simulator::snapshot() const {
 const world::CellDescription& Simulator::description() const { return impl_->world.description(); }
 
 double Simulator::rate() const { return impl_->config.rate; }
+
+const sim::ur::UrController& Simulator::urController(std::size_t index) const {
+    return *impl_->controllers.at(index);
+}
 
 StepStats Simulator::stats() const {
     std::lock_guard lock(impl_->statsMutex);

@@ -7,12 +7,17 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "world/cell_description.hpp"
 #include "world/world.hpp"
+
+namespace pnp::sim::ur {
+class UrController;
+}
 
 namespace pnp::sim::cell {
 
@@ -24,6 +29,9 @@ struct SimulatorConfig {
     std::string bindAddress = "127.0.0.1";  // where device endpoints listen
     bool ephemeralPorts = false;            // every device on a free port (tests, many cells)
     double snapshotRate = 125.0;            // snapshots for readers per second (≤ rate)
+    // Called on the stepping thread after every step (tests and benchmarks that check each
+    // step of the world); keep it short.
+    std::function<void(const world::World&)> onStep;
 };
 
 // Where an adapter finds a simulated device.
@@ -60,6 +68,8 @@ class Simulator {
     // The world as of the latest snapshot (at snapshotRate).
     std::shared_ptr<const world::Snapshot> snapshot() const;
     const world::CellDescription& description() const;
+    // The simulated UR controller of robot `index` (its counters and inputs, for tests).
+    const sim::ur::UrController& urController(std::size_t index) const;
     StepStats stats() const;
     double rate() const;
 
