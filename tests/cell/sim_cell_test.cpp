@@ -5,8 +5,13 @@
 
 #include <chrono>
 #include <cmath>
+#include <mutex>
+#include <numbers>
 #include <thread>
 
+#include "device/ur/ur_hardware.hpp"
+#include "robot/controller.hpp"
+#include "robot/planner.hpp"
 #include "rtde/client.hpp"
 #include "sim/cell/ground_truth.hpp"
 #include "sim/cell/simulator.hpp"
@@ -180,6 +185,113 @@ TEST(SimCell, ServoTargetsOverRtdeMoveTheWorldsRobot) {
     std::this_thread::sleep_for(50ms);  // snapshots are taken at 125 Hz
     const auto snap = sim.snapshot();
     EXPECT_NEAR(snap->robots.at(0).q[0], home[0] + 0.1, 1e-4);
+}
+
+}  // namespace
+
+namespace {
+
+// The whole robot chain — planner, control loop, UR hardware interface, RTDE, the simulated
+// controller, the world — with every world step checked: no joint ever beyond the robot's
+// speed or the controller's acceleration, a LIN's TCP never faster than asked, and a halt
+// braking without a jump.
+TEST(SimCellChain, LimitsHoldAtEveryWorldStep) {
+    struct StepRecord {
+        pnp::world::Joints q, qd;
+        Eigen::Vector3d tcp;
+    };
+    std::mutex mutex;
+    std::vector<StepRecord> steps;
+    steps.reserve(20000);
+    auto config = testConfig();
+    config.onStep = [&](const pnp::world::World& w) {
+        std::lock_guard lock(mutex);
+        if (steps.size() < 20000)
+            steps.push_back({w.robot(0).q, w.robot(0).qd, w.robot(0).tcp.translation()});
+    };
+    const auto cell = thesisCell();
+    const auto& robot = cell.robots.at(0);
+    Simulator sim(cell, config);
+    sim.start();
+
+    pnp::device::ur::UrConfig uc;
+    uc.port = sim.endpoints().at(0).port;
+    uc.model = robot.model;
+    pnp::device::ur::UrHardware hardware(uc);
+    pnp::robot::ControllerConfig cc;
+    pnp::robot::PlannerConfig pc;
+    pc.model = robot.model;
+    pc.worldToBase = robot.base;
+    for (int i = 0; i < 6; ++i) {
+        cc.limits.maxVelocity[i] = robot.model.limits[i].maxVelocity;
+        cc.limits.maxAcceleration[i] = robot.model.limits[i].maxAcceleration;
+    }
+    pc.defaults.joint = cc.limits;
+    pnp::robot::Controller controller(hardware, cc);
+    ASSERT_TRUE(controller.start(pnp::robot::Clock::now() + 5s).ok());
+    pnp::robot::Planner planner(pc);
+    auto run = [&](pnp::robot::Result<pnp::motion::Trajectory> plan, bool halfwayHalt) {
+        ASSERT_TRUE(plan.ok()) << plan.error().message;
+        auto motion = controller.execute(std::move(plan).value());
+        ASSERT_TRUE(motion.ok()) << motion.error().message;
+        if (halfwayHalt) {
+            std::this_thread::sleep_for(400ms);
+            (*motion)->halt();
+        }
+        auto r = (*motion)->wait(pnp::robot::Clock::now() + 20s);
+        ASSERT_TRUE(r.has_value());
+        EXPECT_EQ(r->end,
+                  halfwayHalt ? pnp::robot::MotionEnd::kHalted : pnp::robot::MotionEnd::kCompleted)
+            << r->message;
+    };
+    // A long PTP (the base joint at full speed), a LIN at 0.2 m/s, a PTP halted halfway.
+    auto goal = controller.state()->q;
+    goal[0] += 2.0;
+    run(planner.jointPtp(controller.state()->q, {goal.begin(), goal.end()}, {}), false);
+    pnp::robot::CartesianTarget t;
+    t.pose = Eigen::Isometry3d::Identity();
+    t.pose.linear() =
+        Eigen::AngleAxisd(std::numbers::pi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+    t.pose.translation() = Eigen::Vector3d(-0.1, 0.4, 0.3);
+    run(planner.cartesianPtp(controller.state()->q, t, {}), false);
+    std::size_t linFrom = 0;
+    {
+        std::lock_guard lock(mutex);
+        linFrom = steps.size();
+    }
+    t.pose.translation() = Eigen::Vector3d(0.15, 0.4, 0.3);
+    pnp::robot::LinLimits lin;
+    lin.maxVelocity = {0.2};
+    run(planner.cartesianLinear(controller.state()->q, t, lin), false);
+    std::size_t linTo = 0;
+    {
+        std::lock_guard lock(mutex);
+        linTo = steps.size();
+    }
+    goal = controller.state()->q;
+    goal[0] -= 2.0;
+    run(planner.jointPtp(controller.state()->q, {goal.begin(), goal.end()}, {}), true);
+    controller.stop();
+    sim.stop();
+
+    std::lock_guard lock(mutex);
+    ASSERT_GT(steps.size(), 1000u);
+    constexpr double dt = 0.002;
+    for (std::size_t i = 1; i < steps.size(); ++i) {
+        for (int j = 0; j < 6; ++j) {
+            const double vmax = robot.model.limits[j].maxVelocity;
+            const double amax = 4.0 * robot.model.limits[j].maxAcceleration;  // the controller's
+            ASSERT_LE(std::abs(steps[i].qd[j]), vmax + 1e-9) << "step " << i << " joint " << j;
+            ASSERT_LE(std::abs(steps[i].q[j] - steps[i - 1].q[j]), vmax * dt + 1e-9)
+                << "step " << i << " joint " << j;
+            ASSERT_LE(std::abs(steps[i].qd[j] - steps[i - 1].qd[j]), amax * dt + 1e-9)
+                << "step " << i << " joint " << j;
+        }
+    }
+    // The LIN's TCP speed, from the world: at most the 0.2 m/s asked (+1 % for the discrete
+    // difference).
+    for (std::size_t i = linFrom + 1; i < linTo && i < steps.size(); ++i)
+        ASSERT_LE((steps[i].tcp - steps[i - 1].tcp).norm() / dt, 0.2 * 1.01) << "step " << i;
 }
 
 }  // namespace
