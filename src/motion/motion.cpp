@@ -159,6 +159,19 @@ Trajectory Trajectory::resume(double s) const {
                       vs_, as_);
 }
 
+PathBounds cartesianPathBounds(double length, double angle, const CartesianLimits& limits) {
+    PathBounds b{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    if (length > 0.0) {
+        b.velocity = std::min(b.velocity, limits.maxLinearVelocity / length);
+        b.acceleration = std::min(b.acceleration, limits.maxLinearAcceleration / length);
+    }
+    if (angle > 0.0) {
+        b.velocity = std::min(b.velocity, limits.maxAngularVelocity / angle);
+        b.acceleration = std::min(b.acceleration, limits.maxAngularAcceleration / angle);
+    }
+    return b;
+}
+
 Result<Trajectory> planPtp(const Joints& start, const Joints& goal, const JointLimits& limits) {
     if (auto e = checkJointLimits(limits)) return *e;
     if (!finite(start) || !finite(goal)) return Error{"PTP: non-finite joint values", {}, {}};
@@ -315,16 +328,9 @@ Result<Trajectory> planLin(const Joints& start, const Eigen::Isometry3d& goal,
 
     // 3. Path bounds from the Cartesian limits (the line is linear in s, slerp has constant
     // angular speed: both are exact).
-    double vs = std::numeric_limits<double>::infinity();
-    double as = vs;
-    if (len > 0.0) {
-        vs = std::min(vs, cl.maxLinearVelocity / len);
-        as = std::min(as, cl.maxLinearAcceleration / len);
-    }
-    if (angle > 0.0) {
-        vs = std::min(vs, cl.maxAngularVelocity / angle);
-        as = std::min(as, cl.maxAngularAcceleration / angle);
-    }
+    const PathBounds cartesian = cartesianPathBounds(len, angle, cl);
+    double vs = cartesian.velocity;
+    double as = cartesian.acceleration;
 
     // 4. Joint limits for ANY timing law with |ds/dt| <= vs, |d2s/dt2| <= as (so stop and
     // resume stay within them too): |qd| <= |q'| vs, |qdd| <= |q''| vs^2 + |q'| as, with the

@@ -114,6 +114,15 @@ class Trajectory {
     double as_;
 };
 
+// Path speed and acceleration bounds (ds/dt, d²s/dt² for s in [0, 1]) that a straight line of
+// `length` m turning by `angle` rad keeps within the Cartesian limits (infinite for a null
+// move): the line is linear in s and the rotation's angular speed is constant.
+struct PathBounds {
+    double velocity;
+    double acceleration;
+};
+PathBounds cartesianPathBounds(double length, double angle, const CartesianLimits& limits);
+
 // Joint-space move; all axes start and stop together, the slowest axis sets the duration.
 Result<Trajectory> planPtp(const Joints& start, const Joints& goal, const JointLimits& limits);
 

@@ -95,11 +95,10 @@ class LoopMotion {
     virtual MotionCore& core() = 0;
 };
 
-class TrajectoryMotion final : public Motion, public LoopMotion {
+// The caller's side of a motion (Motion or Stream) on its MotionCore: the same for both kinds.
+template <class Interface>
+class MotionHandle : public Interface, public LoopMotion {
   public:
-    TrajectoryMotion(motion::Trajectory trajectory, MotionOptions options)
-        : base_(trajectory), current_(std::move(trajectory)), options_(options) {}
-
     std::optional<MotionResult> wait(Deadline deadline, std::stop_token stop) override {
         return core_.wait(deadline, std::move(stop));
     }
@@ -108,10 +107,19 @@ class TrajectoryMotion final : public Motion, public LoopMotion {
     void suspend() override { core_.suspend.store(true); }
     void resume() override { core_.suspend.store(false); }
     bool suspended() const override { return core_.suspend.load(); }
-    double progress() const override { return core_.progress.load(); }
-
-    void activate(const Joints&) override {}
     MotionCore& core() override { return core_; }
+
+  protected:
+    MotionCore core_;
+};
+
+class TrajectoryMotion final : public MotionHandle<Motion> {
+  public:
+    TrajectoryMotion(motion::Trajectory trajectory, MotionOptions options)
+        : base_(trajectory), current_(std::move(trajectory)), options_(options) {}
+
+    double progress() const override { return core_.progress.load(); }
+    void activate(const Joints&) override {}
 
     bool step(const State& state, double dt, Joints& command) override {
         for (int i = 0; i < 3; ++i) maxForce_[i] = std::max(maxForce_[i], std::abs(state.force[i]));
@@ -195,7 +203,6 @@ class TrajectoryMotion final : public Motion, public LoopMotion {
         return true;
     }
 
-    MotionCore core_;
     motion::Trajectory base_;     // the planned path, for resume()
     motion::Trajectory current_;  // the timing law being followed (base, braking, resumed)
     MotionOptions options_;
@@ -206,26 +213,17 @@ class TrajectoryMotion final : public Motion, public LoopMotion {
     Eigen::Vector3d maxForce_ = Eigen::Vector3d::Zero();
 };
 
-class StreamMotion final : public Stream, public LoopMotion {
+class StreamMotion final : public MotionHandle<Stream> {
   public:
     StreamMotion(const motion::JointLimits& limits, const Joints& start, Joints brake)
         : limits_(limits), brakeAcceleration_(brake), target_(start) {}
 
-    std::optional<MotionResult> wait(Deadline deadline, std::stop_token stop) override {
-        return core_.wait(deadline, std::move(stop));
-    }
-    bool finished() const override { return core_.finished(); }
-    void halt() override { core_.halt.store(true); }
-    void suspend() override { core_.suspend.store(true); }
-    void resume() override { core_.suspend.store(false); }
-    bool suspended() const override { return core_.suspend.load(); }
     double progress() const override { return 0.0; }
     void setTarget(const Joints& q) override {
         std::lock_guard lock(targetMutex_);
         target_ = q;
     }
 
-    MotionCore& core() override { return core_; }
     void activate(const Joints& commanded) override {
         q_ = commanded;
         v_ = {};
@@ -271,7 +269,6 @@ class StreamMotion final : public Stream, public LoopMotion {
     }
 
   private:
-    MotionCore core_;
     motion::JointLimits limits_;
     Joints brakeAcceleration_;
     std::mutex targetMutex_;

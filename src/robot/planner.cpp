@@ -294,17 +294,9 @@ std::optional<Error> crawl(const motion::Trajectory& t, const Eigen::Isometry3d&
     const double angle =
         Eigen::AngleAxisd(startTool.rotation().transpose() * goalTool.rotation()).angle();
     if ((len == 0.0 && angle == 0.0) || !(t.duration() > 0.0)) return std::nullopt;
-    const auto& cl = limits.cartesian;
-    double vs = std::numeric_limits<double>::infinity(), as = vs;
-    if (len > 0.0) {
-        vs = std::min(vs, cl.maxLinearVelocity / len);
-        as = std::min(as, cl.maxLinearAcceleration / len);
-    }
-    if (angle > 0.0) {
-        vs = std::min(vs, cl.maxAngularVelocity / angle);
-        as = std::min(as, cl.maxAngularAcceleration / angle);
-    }
-    const double cartesianDuration = motion::TimingLaw::restToRest(0.0, 1.0, vs, as).duration();
+    const auto bounds = motion::cartesianPathBounds(len, angle, limits.cartesian);
+    const double cartesianDuration =
+        motion::TimingLaw::restToRest(0.0, 1.0, bounds.velocity, bounds.acceleration).duration();
     const bool linSlow = len / t.duration() < opt.minLinearSpeed;
     const bool angSlow = angle / t.duration() < opt.minAngularSpeed;
     if (!(t.duration() > kSlowdown * cartesianDuration) || !linSlow || !angSlow)
