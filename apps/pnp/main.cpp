@@ -68,7 +68,8 @@ int main(int argc, char** argv) {
         "Run `pnp ua --help` for the OPC UA tools, `pnp lds --help` and `pnp discover --help` "
         "for discovery (docs/discovery.md), `pnp skills --help` and `pnp skill run --help` for "
         "skills (docs/skills.md), `pnp bench middleware --help` for the middleware evaluation "
-        "(docs/middleware_bench.md).");
+        "(docs/middleware_bench.md), `pnp sim --help`, `pnp device ur --help` and `pnp robot "
+        "square --help` for the simulated robot cell (README, docs/ur-real-robot.md).");
 
     std::uint16_t ldsPort = 4840;
     std::string ldsHost = "0.0.0.0";
