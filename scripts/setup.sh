@@ -36,6 +36,10 @@ PACKAGES=(
     liborocos-kdl-dev libkdl-parser-dev liburdfdom-dev libeigen3-dev
     # the cell description file (src/world): YAML with the line of every node, for errors
     libyaml-cpp-dev
+    # the tools' adapters (src/device/robotiq, src/device/ecbpi): Modbus RTU / TCP clients;
+    # the simulators implement the device side themselves (src/modbus), so both sides are
+    # independent implementations of the protocol
+    libmodbus-dev
     # interop / capture / process tools
     tshark iproute2 procps util-linux
     # discovery interop (tests/discovery/discovery_interop_netns_test.cpp): avahi in a

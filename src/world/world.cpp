@@ -117,3 +117,24 @@ void World::update(std::size_t robot) {
 Snapshot World::snapshot() const { return Snapshot{time_, steps_, robots_, objects_, tools_}; }
 
 }  // namespace pnp::world
+
+// ---- (being implemented: tool changer, grip, operator actions) ----
+namespace pnp::world {
+bool World::toolPowered(std::size_t tool) const { return tools_.at(tool).powered; }
+std::optional<Eigen::Isometry3d> World::gripPoint(std::size_t) const { return std::nullopt; }
+std::optional<FingerContact> World::objectBetweenFingers(std::size_t, double) const {
+    return std::nullopt;
+}
+std::optional<std::size_t> World::objectUnderCup(std::size_t) const { return std::nullopt; }
+bool World::hold(std::size_t, std::size_t) { return false; }
+void World::release(std::size_t) {}
+std::optional<std::size_t> World::held(std::size_t) const { return std::nullopt; }
+std::string World::putToolInDock(const std::string&, const std::string&) { return "todo"; }
+std::string World::takeToolOut(const std::string&) { return "todo"; }
+std::string World::placeObject(const std::string&, const Eigen::Isometry3d&) { return "todo"; }
+std::string World::removeObject(const std::string&) { return "todo"; }
+double World::changerVoltage(ChangerLock, int) { return 0.0; }
+void World::updateChanger(std::size_t) {}
+void World::updateHeld() {}
+void World::settle(std::size_t) {}
+}  // namespace pnp::world

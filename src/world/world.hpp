@@ -19,6 +19,13 @@ namespace pnp::world {
 
 using kinematics::Joints;
 
+// The Kelvin tool changer on a robot's flange (cell.md §2): passive, locked by the robot's
+// motion in a dock — in the dock's frame, a turn of the flange about its z axis by
+// WorldConfig::lockAngle locks, the turn back opens. Its state voltage (24 V scale) says
+// what it is: open ("ready") 0 V, turning 2.1 V, locked without a tool 4.9 V, locked with
+// tool 1…10 5.7 … 14.1 V.
+enum class ChangerLock { kOpen, kIntermediate, kLocked };
+
 struct RobotState {
     std::string name;
     Joints q{};                                                // rad
@@ -27,6 +34,9 @@ struct RobotState {
     Eigen::Isometry3d tcp = Eigen::Isometry3d::Identity();     // flange * tool TCP (world)
     std::optional<std::string> tool;                           // locked on the flange
     Eigen::Vector3d tcpForce = Eigen::Vector3d::Zero();        // on the TCP, world frame, N
+    ChangerLock changer = ChangerLock::kOpen;
+    std::optional<std::string> dock;  // the dock the changer sits in (within tolerance)
+    double changerVoltage = 0.0;      // V, the state voltage of the changer
 };
 
 struct ObjectState {
@@ -38,7 +48,9 @@ struct ObjectState {
 struct ToolState {
     std::string name;
     std::optional<std::string> dock;   // parked there, or
-    std::optional<std::string> robot;  // locked on that robot's flange
+    std::optional<std::string> robot;  // locked on that robot's flange; neither: on the shelf
+    bool powered = false;              // only while locked on a flange (its power pins)
+    std::optional<std::string> held;   // the object it holds
 };
 
 // Everything a reader may see, copied at one step.
@@ -54,6 +66,22 @@ struct WorldConfig {
     // Contact: a spring on the TCP point against the top faces of tables and objects.
     double contactStiffness = 20000.0;  // N/m (1 mm deep = 20 N)
     double maxContactForce = 2000.0;    // N (saturation; a real robot stops far earlier)
+    // The tool changer: the turn that locks (about the flange's z axis, in the dock's frame),
+    // and how close the changer must be to a dock's frame for the dock to turn its ring.
+    double lockAngle = 0.5235987755982988;  // rad (30°)
+    double dockPositionTolerance = 0.003;   // m
+    double dockTiltTolerance = 0.05;        // rad between the flange's and the dock's z axes
+    double lockBand = 0.035;                // rad: within this of 0 = open, of lockAngle = locked
+    // Grip: how far the grip point may be from where it should be on an object.
+    double fingerDepth = 0.02;      // m: the fingers reach this far beyond the grip point
+    double cupSealDistance = 0.004;  // m: cup within this above or (pressed) below a top face
+    double cupTiltTolerance = 0.087;  // rad (5°) between the cup's axis and the face normal
+};
+
+// The object between a parallel gripper's fingers and its width across them.
+struct FingerContact {
+    std::size_t object = 0;  // index in objects()
+    double width = 0.0;      // m, the object's extent along the fingers' axis
 };
 
 class World {
@@ -75,6 +103,37 @@ class World {
     const std::vector<ObjectState>& objects() const { return objects_; }
     const std::vector<ToolState>& tools() const { return tools_; }
 
+    // --- What a tool's device simulator may ask the world and tell it (tool: an index in
+    // description().tools). Never for adapters or components.
+    // Power reaches a tool only while it is locked on a flange.
+    bool toolPowered(std::size_t tool) const;
+    // The tool's grip point (world frame): on a flange, in a dock, or none on the shelf.
+    std::optional<Eigen::Isometry3d> gripPoint(std::size_t tool) const;
+    // Parallel gripper open to `opening` (m): the object between its fingers (the grip
+    // frame's x axis is the fingers' axis, z points out of the tool): its centre within the
+    // fingers' depth around the grip point, its width across them below the opening.
+    std::optional<FingerContact> objectBetweenFingers(std::size_t tool, double opening) const;
+    // Vacuum gripper: the object whose flat top face seals the cup at the grip point (the
+    // cup's axis along the face normal, its whole rim on the face, touching it).
+    std::optional<std::size_t> objectUnderCup(std::size_t tool) const;
+    // The tool takes hold of the object (it follows the grip point from now on); false when
+    // the tool already holds another one, or the object is held by another tool.
+    bool hold(std::size_t tool, std::size_t object);
+    // It lets go: the object comes to rest on what is below it (the highest top face of a
+    // table or a resting object under its centre) or falls to the floor.
+    void release(std::size_t tool);
+    std::optional<std::size_t> held(std::size_t tool) const;
+
+    // --- Operator actions (a person in the cell). Each returns an error message, or "".
+    // Put a tool (from the shelf or another dock) into an empty dock.
+    std::string putToolInDock(const std::string& tool, const std::string& dock);
+    // Take a tool out of its dock onto the shelf (not one on a flange).
+    std::string takeToolOut(const std::string& tool);
+    // Place an object at a pose (its centre); it then rests on what is below it.
+    std::string placeObject(const std::string& object, const Eigen::Isometry3d& pose);
+    // Take an object out of the cell (its holder becomes "removed").
+    std::string removeObject(const std::string& object);
+
     // Advances time by dt: updates flange / TCP poses, contact forces, held objects.
     // dt = 0 (or a non-finite / negative dt) only refreshes them: no time, no step counted.
     void step(double dt);
@@ -89,8 +148,14 @@ class World {
     // each robot's TCP point.
     Eigen::Vector3d contactForceAt(const Eigen::Vector3d& point) const;
 
+    // The Kelvin state voltage for a changer state (24 V scale).
+    static double changerVoltage(ChangerLock lock, int toolChangerId);
+
   private:
     void update(std::size_t robot);
+    void updateChanger(std::size_t robot);
+    void updateHeld();
+    void settle(std::size_t object);
 
     CellDescription cell_;
     WorldConfig config_;
