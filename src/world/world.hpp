@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "kinematics/robot_model.hpp"
@@ -53,6 +54,11 @@ struct ToolState {
     std::optional<std::string> held;   // the object it holds
 };
 
+// An object's holder when it was taken out of the cell (removeObject).
+inline constexpr std::string_view kRemoved = "removed";
+// ... and when it fell beside every table.
+inline constexpr std::string_view kFloor = "floor";
+
 // Everything a reader may see, copied at one step.
 struct Snapshot {
     double time = 0.0;  // s since start
@@ -73,9 +79,14 @@ struct WorldConfig {
     double dockTiltTolerance = 0.05;        // rad between the flange's and the dock's z axes
     double lockBand = 0.035;                // rad: within this of 0 = open, of lockAngle = locked
     // Grip: how far the grip point may be from where it should be on an object.
-    double fingerDepth = 0.02;      // m: the fingers reach this far beyond the grip point
-    double cupSealDistance = 0.004;  // m: cup within this above or (pressed) below a top face
+    // A parallel gripper's grip point is at its finger tips; its pads reach `fingerPad` back
+    // from there, and must overlap an object by `minFingerOverlap` to hold it.
+    double fingerPad = 0.035;         // m
+    double minFingerOverlap = 0.005;  // m
+    double fingerClearance = 0.001;   // m an object may stick out beyond the open fingers
+    double cupSealDistance = 0.004;   // m: cup within this above or (pressed) below a face
     double cupTiltTolerance = 0.087;  // rad (5°) between the cup's axis and the face normal
+    double restTolerance = 0.002;     // m: a support up to this above an object's bottom
 };
 
 // The object between a parallel gripper's fingers and its width across them.
@@ -156,6 +167,12 @@ class World {
     void updateChanger(std::size_t robot);
     void updateHeld();
     void settle(std::size_t object);
+    std::optional<Eigen::Isometry3d> toolFrame(std::size_t tool) const;
+    std::optional<std::size_t> toolIndex(const std::string& name) const;
+    std::optional<std::size_t> objectIndex(const std::string& name) const;
+    bool resting(std::size_t object) const;  // in the cell and not held by a tool
+
+    std::vector<Eigen::Isometry3d> heldOffsets_;  // per tool: grip point -> held object
 
     CellDescription cell_;
     WorldConfig config_;

@@ -74,7 +74,7 @@ TEST(ThesisCell, LoadsWithTheThesisContent) {
     EXPECT_EQ(cell.name, "thesis");
     ASSERT_EQ(cell.robots.size(), 1u);
     ASSERT_EQ(cell.tables.size(), 1u);
-    ASSERT_EQ(cell.tools.size(), 2u);
+    ASSERT_EQ(cell.tools.size(), 3u);  // two in docks, the WSG 50 on the shelf
     ASSERT_EQ(cell.docks.size(), 2u);
     ASSERT_EQ(cell.objects.size(), 1u);
 
