@@ -13,7 +13,10 @@
 #include "output.hpp"
 #include "sim/cell/ground_truth.hpp"
 #include "sim/cell/simulator.hpp"
+#include "ua/client/client.hpp"
 #include "ua/server/server.hpp"
+#include "ua/spatial/spatial.hpp"
+#include "ua/types/extension_object.hpp"
 #include "value_text.hpp"
 #include "world/cell_file.hpp"
 
@@ -111,6 +114,54 @@ int runSim(SimOptions& o) {
     return kExitOk;
 }
 
+// `pnp sim tool|object ...`: the operator's hands, through the ground truth's methods.
+struct OperatorOptions {
+    std::string world = "opc.tcp://127.0.0.1:4850";
+    int timeoutMs = 5000;
+    std::string method;              // PutToolInDock, TakeToolOut, PlaceObject, RemoveObject
+    std::vector<std::string> names;  // tool [dock] / object
+    std::vector<double> xyz;         // PlaceObject
+    std::vector<double> rpy{0.0, 0.0, 0.0};
+    std::string object;
+};
+
+int runOperator(const OperatorOptions& o) {
+    using namespace std::chrono;
+    const auto deadline = steady_clock::now() + milliseconds(o.timeoutMs);
+    std::vector<ua::Variant> inputs;
+    for (const auto& n : o.names) inputs.emplace_back(ua::String(n));
+    if (o.method == "PlaceObject") {
+        Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+        pose.translation() = Eigen::Vector3d(o.xyz[0], o.xyz[1], o.xyz[2]);
+        pose.linear() = (Eigen::AngleAxisd(o.rpy[2], Eigen::Vector3d::UnitZ()) *
+                         Eigen::AngleAxisd(o.rpy[1], Eigen::Vector3d::UnitY()) *
+                         Eigen::AngleAxisd(o.rpy[0], Eigen::Vector3d::UnitX()))
+                            .toRotationMatrix();
+        inputs.emplace_back(ua::toExtensionObject(ua::spatial::toFrame(pose)));
+    }
+    try {
+        ua::client::Client client;
+        client.connect(o.world, ua::client::Anonymous{}, deadline);
+        const ua::UInt16 ns = client.namespaceIndex(sim::cell::kWorldNamespaceUri, deadline);
+        const auto r = client.call(ua::NodeId(ns, "World"), ua::NodeId(ns, "World." + o.method),
+                                   std::move(inputs), deadline);
+        client.disconnect();
+        if (!r.ok()) {
+            std::cerr << "error: " << o.method << ": " << statusText(r.status) << "\n";
+            return kExitUaError;
+        }
+        const auto* error = r.outputs.empty() ? nullptr : r.outputs[0].scalar<ua::String>();
+        if (error != nullptr && !error->empty()) {
+            std::cerr << "error: " << *error << "\n";
+            return kExitUsage;
+        }
+    } catch (const std::exception& e) {
+        std::cerr << "error: " << o.world << ": " << e.what() << "\n";
+        return kExitUaError;
+    }
+    return kExitOk;
+}
+
 }  // namespace
 
 std::function<int()> addSimCommands(CLI::App& app) {
@@ -143,8 +194,52 @@ std::function<int()> addSimCommands(CLI::App& app) {
         "Prints one JSON line: {\"cell\", \"file\", \"rate\", \"world\": ground truth URL, "
         "\"devices\": [{\"name\", \"device\", \"protocol\", \"address\"}]}.\n"
         "Then: pnp device ur --controller 127.0.0.1:30004; pnp robot square auto");
-    return [cmd, o]() -> int {
+
+    // The operator's hands in a running simulation.
+    auto op = std::make_shared<OperatorOptions>();
+    auto worldOption = [op](CLI::App* c) {
+        c->add_option("--world", op->world, "the ground truth server of `pnp sim`")
+            ->capture_default_str();
+        c->add_option("--timeout", op->timeoutMs, "ms")->capture_default_str();
+    };
+    CLI::App* tool = cmd->add_subcommand("tool", "an operator's hands on the tools");
+    tool->require_subcommand(1);
+    CLI::App* put =
+        tool->add_subcommand("put", "put a tool (from the shelf or a dock) into an empty dock");
+    put->add_option("tool", op->names, "TOOL DOCK")->expected(2)->required();
+    worldOption(put);
+    put->callback([op] { op->method = "PutToolInDock"; });
+    CLI::App* take = tool->add_subcommand("take", "take a tool out of its dock (onto the shelf)");
+    take->add_option("tool", op->object, "TOOL")->required();
+    worldOption(take);
+    take->callback([op] {
+        op->method = "TakeToolOut";
+        op->names = {op->object};
+    });
+    CLI::App* object = cmd->add_subcommand("object", "an operator's hands on the objects");
+    object->require_subcommand(1);
+    CLI::App* place = object->add_subcommand(
+        "place",
+        "place an object at X Y Z (its centre, world frame, m); it rests on what is below");
+    place->add_option("object", op->object, "OBJECT")->required();
+    place->add_option("xyz", op->xyz, "X Y Z")->expected(3)->required();
+    place->add_option("--rpy", op->rpy, "roll pitch yaw (rad, fixed axes X Y Z)")->expected(3);
+    worldOption(place);
+    place->callback([op] {
+        op->method = "PlaceObject";
+        op->names = {op->object};
+    });
+    CLI::App* remove = object->add_subcommand("remove", "take an object out of the cell");
+    remove->add_option("object", op->object, "OBJECT")->required();
+    worldOption(remove);
+    remove->callback([op] {
+        op->method = "RemoveObject";
+        op->names = {op->object};
+    });
+
+    return [cmd, o, op]() -> int {
         if (!*cmd) return -1;
+        if (!op->method.empty()) return runOperator(*op);
         return runSim(*o);
     };
 }

@@ -30,11 +30,23 @@ Variant vector3(const Eigen::Vector3d& v) {
     return Variant(ua::toExtensionObject(ua::spatial::toThreeDVector(v)));
 }
 
+Variant changer(world::ChangerLock lock) {
+    switch (lock) {
+        case world::ChangerLock::kOpen:
+            return Variant(ua::String("Open"));
+        case world::ChangerLock::kIntermediate:
+            return Variant(ua::String("Intermediate"));
+        case world::ChangerLock::kLocked:
+            return Variant(ua::String("Locked"));
+    }
+    return Variant(ua::String(""));
+}
+
 }  // namespace
 
 struct GroundTruth::Impl {
     ua::server::Server& server;
-    const Simulator& simulator;
+    Simulator& simulator;
     GroundTruthOptions options;
     ua::UInt16 ns = 0;
 
@@ -47,7 +59,7 @@ struct GroundTruth::Impl {
     // subscribers see changes, not the update rate.
     std::map<NodeId, Variant> last;
 
-    Impl(ua::server::Server& s, const Simulator& sim, GroundTruthOptions o)
+    Impl(ua::server::Server& s, Simulator& sim, GroundTruthOptions o)
         : server(s), simulator(sim), options(o) {}
 
     NodeId id(const std::string& path) const { return NodeId(ns, path); }
@@ -88,6 +100,11 @@ struct GroundTruth::Impl {
                      vector3(r.tcpForce));
             variable(o, p + ".Tool", "Tool", ua::ns0::String, -1,
                      Variant(ua::String(r.tool.value_or(""))));
+            variable(o, p + ".Changer", "Changer", ua::ns0::String, -1, changer(r.changer));
+            variable(o, p + ".ChangerVoltage", "ChangerVoltage", ua::ns0::Double, -1,
+                     Variant(r.changerVoltage));
+            variable(o, p + ".Dock", "Dock", ua::ns0::String, -1,
+                     Variant(ua::String(r.dock.value_or(""))));
         }
         const NodeId objects = space.addFolder(root, id("Objects"), QualifiedName{ns, "Objects"});
         for (const auto& x : snap->objects) {
@@ -105,7 +122,84 @@ struct GroundTruth::Impl {
                      Variant(ua::String(t.dock.value_or(""))));
             variable(o, p + ".Robot", "Robot", ua::ns0::String, -1,
                      Variant(ua::String(t.robot.value_or(""))));
+            variable(o, p + ".Powered", "Powered", ua::ns0::Boolean, -1, Variant(t.powered));
+            variable(o, p + ".Held", "Held", ua::ns0::String, -1,
+                     Variant(ua::String(t.held.value_or(""))));
         }
+        addOperatorMethods(root);
+    }
+
+    // The operator's hands: each call runs on the simulator's stepping thread (the world is
+    // that thread's) and completes from there, never blocking the network thread.
+    void operatorMethod(const NodeId& parent, const std::string& name,
+                        std::vector<ua::Argument> inputs,
+                        std::function<std::string(world::World&, std::vector<Variant>&)> act) {
+        ua::Argument error;
+        error.name = "Error";
+        error.dataType = NodeId(0, ua::ns0::String);
+        error.valueRank = -1;
+        error.description = ua::LocalizedText("", "why it was not done; empty: done");
+        Simulator* sim = &simulator;
+        server.addressSpace().addMethod(
+            parent, id("World." + name), QualifiedName{ns, name}, inputs, {error},
+            [sim, act](const ua::server::MethodCallContext&, std::vector<Variant> in,
+                       ua::server::MethodCompletion done) {
+                sim->post([act, in = std::move(in), done](world::World& w) mutable {
+                    done.succeed({Variant(ua::String(act(w, in)))});
+                });
+            });
+    }
+
+    static ua::Argument stringArgument(const std::string& name, const std::string& what) {
+        ua::Argument a;
+        a.name = name;
+        a.dataType = NodeId(0, ua::ns0::String);
+        a.valueRank = -1;
+        a.description = ua::LocalizedText("", what);
+        return a;
+    }
+
+    static std::string text(const Variant& v) {
+        const auto* s = v.scalar<ua::String>();
+        return s != nullptr ? std::string(*s) : std::string();
+    }
+
+    void addOperatorMethods(const NodeId& root) {
+        operatorMethod(root, "PutToolInDock",
+                       {stringArgument("Tool", "a tool of the cell (on the shelf or in a dock)"),
+                        stringArgument("Dock", "an empty dock")},
+                       [](world::World& w, std::vector<Variant>& in) {
+                           return w.putToolInDock(text(in[0]), text(in[1]));
+                       });
+        operatorMethod(
+            root, "TakeToolOut", {stringArgument("Tool", "a tool in a dock; it goes to the shelf")},
+            [](world::World& w, std::vector<Variant>& in) { return w.takeToolOut(text(in[0])); });
+        ua::Argument pose;
+        pose.name = "Pose";
+        pose.dataType = NodeId(0, ua::ns0::ThreeDFrame);
+        pose.valueRank = -1;
+        pose.description = ua::LocalizedText("",
+                                             "its centre, world frame; it then rests on what "
+                                             "is below it");
+        operatorMethod(root, "PlaceObject",
+                       {stringArgument("Object", "an object of the cell"), pose},
+                       [](world::World& w, std::vector<Variant>& in) {
+                           const auto* x = in[1].scalar<ua::ExtensionObject>();
+                           std::optional<ua::ThreeDFrame> frame;
+                           try {
+                               if (x != nullptr)
+                                   frame = ua::fromExtensionObject<ua::ThreeDFrame>(*x);
+                           } catch (const ua::DecodeError&) {
+                               frame.reset();
+                           }
+                           if (!frame || !ua::spatial::finite(*frame))
+                               return std::string("Pose is not a finite ThreeDFrame");
+                           return w.placeObject(text(in[0]), ua::spatial::toIsometry(*frame));
+                       });
+        operatorMethod(
+            root, "RemoveObject",
+            {stringArgument("Object", "an object of the cell; it leaves the cell")},
+            [](world::World& w, std::vector<Variant>& in) { return w.removeObject(text(in[0])); });
     }
 
     void set(const std::string& path, Variant value) {
@@ -127,6 +221,9 @@ struct GroundTruth::Impl {
             set(p + ".TcpPose", frame(r.tcp));
             set(p + ".TcpForce", vector3(r.tcpForce));
             set(p + ".Tool", Variant(ua::String(r.tool.value_or(""))));
+            set(p + ".Changer", changer(r.changer));
+            set(p + ".ChangerVoltage", Variant(r.changerVoltage));
+            set(p + ".Dock", Variant(ua::String(r.dock.value_or(""))));
         }
         for (const auto& x : s.objects) {
             const std::string p = "Objects." + x.name;
@@ -137,6 +234,8 @@ struct GroundTruth::Impl {
             const std::string p = "Tools." + t.name;
             set(p + ".Dock", Variant(ua::String(t.dock.value_or(""))));
             set(p + ".Robot", Variant(ua::String(t.robot.value_or(""))));
+            set(p + ".Powered", Variant(t.powered));
+            set(p + ".Held", Variant(ua::String(t.held.value_or(""))));
         }
     }
 
@@ -158,7 +257,7 @@ struct GroundTruth::Impl {
     }
 };
 
-GroundTruth::GroundTruth(ua::server::Server& server, const Simulator& simulator,
+GroundTruth::GroundTruth(ua::server::Server& server, Simulator& simulator,
                          GroundTruthOptions options)
     : impl_(std::make_unique<Impl>(server, simulator, options)) {
     if (!(options.rate > 0.0 && options.rate <= 1000.0))

@@ -4,9 +4,16 @@
 //   Objects/World                 Time (Double, s), Step (UInt64), CellName (String)
 //     Robots/<robot>              Joints, JointVelocities (Double[6]: rad, rad/s),
 //                                 FlangePose, TcpPose (ThreeDFrame, world), TcpForce
-//                                 (ThreeDVector, N, world), Tool (String, "" = none)
+//                                 (ThreeDVector, N, world), Tool (String, "" = none),
+//                                 Changer (String: Open, Intermediate, Locked),
+//                                 ChangerVoltage (Double, V), Dock (String: the dock the
+//                                 changer sits in, "" = none)
 //     Objects/<object>            Pose (ThreeDFrame), Holder (String)
-//     Tools/<tool>                Dock (String), Robot (String)
+//     Tools/<tool>                Dock (String), Robot (String), Powered (Boolean),
+//                                 Held (String: the object it holds)
+//   and the operator's hands, methods of World (each returns Error: String, "" = done):
+//     PutToolInDock(Tool, Dock), TakeToolOut(Tool), PlaceObject(Object, Pose: ThreeDFrame),
+//     RemoveObject(Object)
 //
 // Poses use pnp's convention (ua/spatial/spatial.hpp). Values are updated from the
 // simulator's snapshots at `rate` by a thread of its own, only when they changed.
@@ -29,8 +36,7 @@ struct GroundTruthOptions {
 class GroundTruth {
   public:
     // Adds the nodes (before server.start()); start() begins the updates.
-    GroundTruth(ua::server::Server& server, const Simulator& simulator,
-                GroundTruthOptions options = {});
+    GroundTruth(ua::server::Server& server, Simulator& simulator, GroundTruthOptions options = {});
     ~GroundTruth();  // stop()
     GroundTruth(const GroundTruth&) = delete;
     GroundTruth& operator=(const GroundTruth&) = delete;

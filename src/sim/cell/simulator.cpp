@@ -47,6 +47,18 @@ struct Simulator::Impl {
 
     std::thread thread;
     std::atomic<bool> running{false};
+
+    std::mutex postedMutex;
+    std::vector<std::function<void(world::World&)>> posted;
+
+    void runPosted() {
+        std::vector<std::function<void(world::World&)>> actions;
+        {
+            std::lock_guard lock(postedMutex);
+            actions.swap(posted);
+        }
+        for (auto& a : actions) a(world);
+    }
     std::atomic<bool> realtime{false};
 
     mutable std::mutex snapshotMutex;
@@ -80,6 +92,7 @@ struct Simulator::Impl {
             const auto late = start - next;
             // Fixed dt whatever the wake-up time: the world's trajectory depends only on its
             // inputs, not on the scheduler. A step that starts late is counted.
+            runPosted();
             for (auto& c : controllers) c->step(dt);
             world.step(dt);
             for (auto& c : controllers) c->publish();
@@ -150,13 +163,20 @@ void Simulator::start() {
         impl_->endpoints.push_back({robots[i].name, "ur-controller", "rtde",
                                     impl_->config.bindAddress, impl_->servers[i]->port()});
     }
-    impl_->running = true;
+    {
+        std::lock_guard lock(impl_->postedMutex);
+        impl_->running = true;
+    }
     impl_->thread = std::thread([this] { impl_->loop(); });
 }
 
 void Simulator::stop() {
-    if (!impl_->running.exchange(false)) return;
+    {
+        std::lock_guard lock(impl_->postedMutex);
+        if (!impl_->running.exchange(false)) return;
+    }
     if (impl_->thread.joinable()) impl_->thread.join();
+    impl_->runPosted();  // posted just before the last step: still done (their callers wait)
     for (auto& s : impl_->servers) s->stop();
 }
 
@@ -170,6 +190,20 @@ std::shared_ptr<const world::Snapshot> Simulator::snapshot() const {
 const world::CellDescription& Simulator::description() const { return impl_->world.description(); }
 
 double Simulator::rate() const { return impl_->config.rate; }
+
+void Simulator::post(std::function<void(world::World&)> action) {
+    {
+        std::lock_guard lock(impl_->postedMutex);
+        if (impl_->running) {
+            impl_->posted.push_back(std::move(action));
+            return;
+        }
+    }
+    // Not stepping: the world is ours; the snapshot shows the result at once.
+    action(impl_->world);
+    impl_->world.step(0.0);
+    impl_->publishSnapshot();
+}
 
 const sim::ur::UrController& Simulator::urController(std::size_t index) const {
     return *impl_->controllers.at(index);

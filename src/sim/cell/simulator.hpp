@@ -68,6 +68,9 @@ class Simulator {
     // The world as of the latest snapshot (at snapshotRate).
     std::shared_ptr<const world::Snapshot> snapshot() const;
     const world::CellDescription& description() const;
+    // Runs `action` on the stepping thread before the next step (the world belongs to that
+    // thread): operator actions, test set-ups. Before start() it runs at once, here.
+    void post(std::function<void(world::World&)> action);
     // The simulated UR controller of robot `index` (its counters and inputs, for tests).
     const sim::ur::UrController& urController(std::size_t index) const;
     StepStats stats() const;
