@@ -6,8 +6,13 @@
 #include <signal.h>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
+
+namespace CLI {
+class App;
+}
 
 namespace pnp::cli {
 
@@ -144,6 +149,10 @@ int runWrite(const ClientOptions& client, const WriteOptions& options);
 int runCall(const ClientOptions& client, const CallOptions& options);
 int runMonitor(const ClientOptions& client, const MonitorOptions& options);
 int runEvents(const ClientOptions& client, const EventsOptions& options);
+
+// `pnp device robotiq | wsg | ecbpi` below `device` (gripper_commands.cpp); the runner
+// returns -1 when none of them was chosen.
+std::function<int()> addGripperDeviceCommands(CLI::App* device);
 
 // Blocks SIGINT and SIGTERM in the calling thread (call before any thread exists: every
 // thread inherits the mask) and returns them, for sigwait() / sigtimedwait().

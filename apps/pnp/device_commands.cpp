@@ -175,6 +175,8 @@ int runUrDevice(UrDeviceOptions& o) {
 
 }  // namespace
 
+std::function<int()> addKelvinAdcCommand(CLI::App& device);  // toolchanger_commands.cpp
+
 std::function<int()> addDeviceCommands(CLI::App& app) {
     auto o = std::make_shared<UrDeviceOptions>();
     o->serve.port = 4841;
@@ -212,8 +214,11 @@ std::function<int()> addDeviceCommands(CLI::App& app) {
         "Prints `listening on opc.tcp://HOST:PORT` once ready; stops on SIGINT/SIGTERM (a "
         "running move is halted first).\n"
         "Example: pnp device ur --controller 192.168.1.10 --name UR5 --port 4841");
-    return [o, ur]() -> int {
-        if (!*ur) return -1;
+    const auto runGripper = addGripperDeviceCommands(device);  // robotiq, wsg, ecbpi
+    const auto runKelvinAdc = addKelvinAdcCommand(*device);    // toolchanger_commands.cpp
+    return [o, ur, runGripper, runKelvinAdc]() -> int {
+        if (const int rc = runKelvinAdc(); rc >= 0) return rc;
+        if (!*ur) return runGripper();
         return runUrDevice(*o);
     };
 }

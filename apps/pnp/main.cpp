@@ -21,6 +21,7 @@ std::function<int()> addBenchCommands(CLI::App& app);
 std::function<int()> addSimCommands(CLI::App& app);
 std::function<int()> addDeviceCommands(CLI::App& app);
 std::function<int()> addRobotCommands(CLI::App& app);
+std::function<int()> addComponentCommands(CLI::App& app);  // toolchanger_commands.cpp
 }  // namespace pnp::cli
 
 namespace {
@@ -300,6 +301,7 @@ int main(int argc, char** argv) {
     const auto runSim = addSimCommands(app);
     const auto runDevice = addDeviceCommands(app);
     const auto runRobot = addRobotCommands(app);
+    const auto runComponent = addComponentCommands(app);
 
     try {
         app.parse(argc, argv);
@@ -317,6 +319,7 @@ int main(int argc, char** argv) {
         if (const int rc = runSim(); rc >= 0) return rc;
         if (const int rc = runDevice(); rc >= 0) return rc;
         if (const int rc = runRobot(); rc >= 0) return rc;
+        if (const int rc = runComponent(); rc >= 0) return rc;
         if (*serve) return runServe(serveOpts);
         if (*demoSkills) return runServe(skillsOpts);
         if (*skillsCmd) return runSkills(skillsListOpts);

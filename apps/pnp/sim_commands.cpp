@@ -83,11 +83,15 @@ int runSim(SimOptions& o) {
     }
 
     Json devices = Json::array();
-    for (const auto& d : simulator.endpoints())
-        devices.push_back({{"name", d.name},
-                           {"device", d.device},
-                           {"protocol", d.protocol},
-                           {"address", d.host + ":" + std::to_string(d.port)}});
+    for (const auto& d : simulator.endpoints()) {
+        Json device = {{"name", d.name},
+                       {"device", d.device},
+                       {"protocol", d.protocol},
+                       {"address", d.address()}};
+        if (d.slave != 0) device["slave"] = d.slave;
+        if (d.ioLinkPort != 0) device["iolink-port"] = d.ioLinkPort;
+        devices.push_back(std::move(device));
+    }
     Json line = {{"cell", simulator.description().name},
                  {"file", file.string()},
                  {"rate", simulator.rate()},
@@ -123,6 +127,7 @@ struct OperatorOptions {
     std::vector<double> xyz;         // PlaceObject
     std::vector<double> rpy{0.0, 0.0, 0.0};
     std::string object;
+    std::string robot = "ur5";
 };
 
 int runOperator(const OperatorOptions& o) {
@@ -215,6 +220,23 @@ std::function<int()> addSimCommands(CLI::App& app) {
     take->callback([op] {
         op->method = "TakeToolOut";
         op->names = {op->object};
+    });
+    CLI::App* attach = tool->add_subcommand(
+        "attach", "lock a tool on a robot's changer by hand (it is then powered)");
+    attach->add_option("tool", op->object, "TOOL")->required();
+    attach->add_option("--robot", op->robot, "the robot")->capture_default_str();
+    worldOption(attach);
+    attach->callback([op] {
+        op->method = "AttachToolByHand";
+        op->names = {op->robot, op->object};
+    });
+    CLI::App* detach =
+        tool->add_subcommand("detach", "unlock a robot's tool by hand (onto the shelf)");
+    detach->add_option("--robot", op->robot, "the robot")->capture_default_str();
+    worldOption(detach);
+    detach->callback([op] {
+        op->method = "DetachToolByHand";
+        op->names = {op->robot};
     });
     CLI::App* object = cmd->add_subcommand("object", "an operator's hands on the objects");
     object->require_subcommand(1);

@@ -454,6 +454,42 @@ std::string World::takeToolOut(const std::string& tool) {
     return "";
 }
 
+std::string World::attachToolByHand(const std::string& robot, const std::string& tool) {
+    const auto t = toolIndex(tool);
+    if (!t) return "no tool '" + tool + "' in the cell";
+    for (RobotState& r : robots_) {
+        if (r.name != robot) continue;
+        if (r.tool) return "robot '" + robot + "' has tool '" + *r.tool + "' on its flange";
+        if (r.changer != ChangerLock::kOpen)
+            return "the changer of robot '" + robot + "' is not open";
+        if (tools_[*t].robot)
+            return "tool '" + tool + "' is on the flange of robot '" + *tools_[*t].robot + "'";
+        tools_[*t].dock.reset();
+        tools_[*t].robot = robot;
+        r.tool = tool;
+        r.changer = ChangerLock::kLocked;
+        step(0.0);
+        return "";
+    }
+    return "no robot '" + robot + "' in the cell";
+}
+
+std::string World::detachToolByHand(const std::string& robot) {
+    for (RobotState& r : robots_) {
+        if (r.name != robot) continue;
+        if (!r.tool) return "robot '" + robot + "' has no tool on its flange";
+        if (const auto t = toolIndex(*r.tool)) {
+            release(*t);
+            tools_[*t].robot.reset();
+        }
+        r.tool.reset();
+        r.changer = ChangerLock::kOpen;
+        step(0.0);
+        return "";
+    }
+    return "no robot '" + robot + "' in the cell";
+}
+
 std::string World::placeObject(const std::string& object, const Eigen::Isometry3d& pose) {
     const auto o = objectIndex(object);
     if (!o) return "no object '" + object + "' in the cell";

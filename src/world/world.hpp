@@ -140,6 +140,10 @@ class World {
     std::string putToolInDock(const std::string& tool, const std::string& dock);
     // Take a tool out of its dock onto the shelf (not one on a flange).
     std::string takeToolOut(const std::string& tool);
+    // Lock a tool (from a dock or the shelf) on a robot's open, empty changer by hand (the
+    // Kelvin changer's lock can be worked by a person too); and unlock it onto the shelf.
+    std::string attachToolByHand(const std::string& robot, const std::string& tool);
+    std::string detachToolByHand(const std::string& robot);
     // Place an object at a pose (its centre); it then rests on what is below it.
     std::string placeObject(const std::string& object, const Eigen::Isometry3d& pose);
     // Take an object out of the cell (its holder becomes "removed").

@@ -44,7 +44,8 @@ TEST(CellProcesses, SquareTestThroughSimulatorAdapterAndSkills) {
         << error;
     ASSERT_TRUE(sim.waitForPrefix("{", 20s, error, &line)) << error << sim.logTail();
     const auto info = nlohmann::json::parse(line);
-    ASSERT_EQ(info.at("devices").size(), 1u) << line;
+    // The robot's controller, the three tools' devices and the changer's ADC input.
+    ASSERT_EQ(info.at("devices").size(), 5u) << line;
     const auto& ur = info.at("devices").at(0);
     EXPECT_EQ(ur.at("device"), "ur-controller");
     EXPECT_EQ(ur.at("protocol"), "rtde");

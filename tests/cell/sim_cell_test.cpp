@@ -51,7 +51,20 @@ TEST(SimCell, ServesTheUrControllerOverRtdeOnTheAddressItReports) {
     Simulator sim(cell, testConfig());
     sim.start();
     const auto endpoints = sim.endpoints();
-    ASSERT_EQ(endpoints.size(), 1u);
+    // The UR controller first, then the tools' devices and the changer's ADC input.
+    ASSERT_EQ(endpoints.size(), 5u);
+    EXPECT_EQ(endpoints[1].device, "robotiq-2f85");
+    EXPECT_EQ(endpoints[1].protocol, "modbus-rtu");
+    EXPECT_EQ(endpoints[1].address().rfind("/dev/pts/", 0), 0u) << endpoints[1].address();
+    EXPECT_EQ(endpoints[2].device, "schmalz-ecbpi");
+    EXPECT_EQ(endpoints[2].ioLinkPort, 1u);
+    EXPECT_EQ(endpoints[3].device, "schunk-wsg50");
+    EXPECT_EQ(endpoints[4].device, "kelvin-adc-input");
+    EXPECT_EQ(endpoints[4].name, "ur5-changer");
+    for (const auto& e : endpoints)
+        if (e.path.empty()) {
+            EXPECT_NE(e.port, 0) << e.name;
+        }
     EXPECT_EQ(endpoints[0].name, "ur5");
     EXPECT_EQ(endpoints[0].device, "ur-controller");
     EXPECT_EQ(endpoints[0].protocol, "rtde");

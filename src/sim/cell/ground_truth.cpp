@@ -174,6 +174,17 @@ struct GroundTruth::Impl {
         operatorMethod(
             root, "TakeToolOut", {stringArgument("Tool", "a tool in a dock; it goes to the shelf")},
             [](world::World& w, std::vector<Variant>& in) { return w.takeToolOut(text(in[0])); });
+        operatorMethod(root, "AttachToolByHand",
+                       {stringArgument("Robot", "a robot whose changer is open and empty"),
+                        stringArgument("Tool", "a tool in a dock or on the shelf")},
+                       [](world::World& w, std::vector<Variant>& in) {
+                           return w.attachToolByHand(text(in[0]), text(in[1]));
+                       });
+        operatorMethod(root, "DetachToolByHand",
+                       {stringArgument("Robot", "a robot with a tool; the tool goes to the shelf")},
+                       [](world::World& w, std::vector<Variant>& in) {
+                           return w.detachToolByHand(text(in[0]));
+                       });
         ua::Argument pose;
         pose.name = "Pose";
         pose.dataType = NodeId(0, ua::ns0::ThreeDFrame);

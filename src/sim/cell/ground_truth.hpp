@@ -12,8 +12,8 @@
 //     Tools/<tool>                Dock (String), Robot (String), Powered (Boolean),
 //                                 Held (String: the object it holds)
 //   and the operator's hands, methods of World (each returns Error: String, "" = done):
-//     PutToolInDock(Tool, Dock), TakeToolOut(Tool), PlaceObject(Object, Pose: ThreeDFrame),
-//     RemoveObject(Object)
+//     PutToolInDock(Tool, Dock), TakeToolOut(Tool), AttachToolByHand(Robot, Tool),
+//     DetachToolByHand(Robot), PlaceObject(Object, Pose: ThreeDFrame), RemoveObject(Object)
 //
 // Poses use pnp's convention (ua/spatial/spatial.hpp). Values are updated from the
 // simulator's snapshots at `rate` by a thread of its own, only when they changed.

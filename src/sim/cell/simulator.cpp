@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "rtde/server.hpp"
+#include "sim/cell/hosted_devices.hpp"
 #include "sim/ur/ur_controller.hpp"
 
 namespace pnp::sim::cell {
@@ -31,6 +32,22 @@ constexpr std::size_t kCostWindow = 4096;
 
 }  // namespace
 
+std::string DeviceEndpoint::address() const {
+    if (!path.empty()) return path;
+    return host + ":" + std::to_string(port);
+}
+
+DeviceEndpoint DeviceEndpoint::tcp(std::string name, std::string device, std::string protocol,
+                                   std::string host, std::uint16_t port) {
+    DeviceEndpoint e;
+    e.name = std::move(name);
+    e.device = std::move(device);
+    e.protocol = std::move(protocol);
+    e.host = std::move(host);
+    e.port = port;
+    return e;
+}
+
 std::filesystem::path defaultCellFile() {
     if (const char* env = std::getenv("PNP_CELL"); env != nullptr && *env != '\0') return env;
     return std::filesystem::path(PNP_CELLS_DIR) / "thesis.yaml";
@@ -43,6 +60,7 @@ struct Simulator::Impl {
     world::World world;
     std::vector<std::unique_ptr<ur::UrController>> controllers;
     std::vector<std::unique_ptr<rtde::Server>> servers;
+    std::vector<std::unique_ptr<HostedDevice>> devices;  // tools, tool changers
     std::vector<DeviceEndpoint> endpoints;
 
     std::thread thread;
@@ -95,6 +113,7 @@ struct Simulator::Impl {
             runPosted();
             for (auto& c : controllers) c->step(dt);
             world.step(dt);
+            for (auto& d : devices) d->step(dt);
             for (auto& c : controllers) c->publish();
             for (auto& s : servers) s->cycle();
             if (config.onStep) config.onStep(world);
@@ -139,8 +158,10 @@ Simulator::Simulator(world::CellDescription cell, SimulatorConfig config)
         sc.realtimePriority = kRealtimePriority;
         impl_->servers.push_back(std::make_unique<rtde::Server>(sc, *impl_->controllers.back()));
     }
+    impl_->devices = makeHostedDevices(impl_->world, config);
     // Outputs valid before the first step: a client that connects at once reads the home pose.
     impl_->world.step(0.0);
+    for (auto& d : impl_->devices) d->step(0.0);
     for (auto& c : impl_->controllers) c->publish();
     impl_->publishSnapshot();
 }
@@ -160,8 +181,20 @@ void Simulator::start() {
                                                   impl_->config.bindAddress + ":" +
                                                   std::to_string(robots[i].controller.port));
         }
-        impl_->endpoints.push_back({robots[i].name, "ur-controller", "rtde",
-                                    impl_->config.bindAddress, impl_->servers[i]->port()});
+        impl_->endpoints.push_back(DeviceEndpoint::tcp(robots[i].name, "ur-controller", "rtde",
+                                                       impl_->config.bindAddress,
+                                                       impl_->servers[i]->port()));
+    }
+    for (std::size_t i = 0; i < impl_->devices.size(); ++i) {
+        try {
+            impl_->devices[i]->start();
+        } catch (const std::system_error& e) {
+            for (std::size_t k = 0; k < i; ++k) impl_->devices[k]->stop();
+            for (auto& s : impl_->servers) s->stop();
+            const DeviceEndpoint d = impl_->devices[i]->endpoint();
+            throw std::system_error(e.code(), d.name + " (" + d.device + ") on " + d.address());
+        }
+        impl_->endpoints.push_back(impl_->devices[i]->endpoint());
     }
     {
         std::lock_guard lock(impl_->postedMutex);
@@ -178,6 +211,7 @@ void Simulator::stop() {
     if (impl_->thread.joinable()) impl_->thread.join();
     impl_->runPosted();  // posted just before the last step: still done (their callers wait)
     for (auto& s : impl_->servers) s->stop();
+    for (auto& d : impl_->devices) d->stop();
 }
 
 std::vector<DeviceEndpoint> Simulator::endpoints() const { return impl_->endpoints; }

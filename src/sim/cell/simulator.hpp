@@ -37,10 +37,18 @@ struct SimulatorConfig {
 // Where an adapter finds a simulated device.
 struct DeviceEndpoint {
     std::string name;      // the thing in the cell file (robot name, tool name...)
-    std::string device;    // what is simulated, e.g. "ur-controller"
-    std::string protocol;  // e.g. "rtde"
-    std::string host;
+    std::string device;    // what is simulated, e.g. "ur-controller", "robotiq-2f85"
+    std::string protocol;  // "rtde", "modbus-rtu", "modbus-tcp", "wsg-tcp"
+    std::string host;      // TCP devices
     std::uint16_t port = 0;
+    std::string path;            // serial devices: the line to open (a pseudo-terminal)
+    int slave = 0;               // Modbus RTU: the slave address
+    std::size_t ioLinkPort = 0;  // behind an IO-Link master: the device's port on it
+
+    // "HOST:PORT" or the serial line's path.
+    std::string address() const;
+    static DeviceEndpoint tcp(std::string name, std::string device, std::string protocol,
+                              std::string host, std::uint16_t port);
 };
 
 struct StepStats {

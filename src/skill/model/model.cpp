@@ -23,6 +23,7 @@ const std::vector<ModelNode>& knownTypes() {
                                                DetachToolSkillType,
                                                AttachToolSkillType,
                                                ChangeToolSkillType,
+                                               DropToolSkillType,
                                                PickAndPlaceSkillType,
                                                ExecuteProcessSkillType,
                                                DelaySkillType};

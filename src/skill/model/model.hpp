@@ -68,6 +68,7 @@ inline constexpr ModelNode SkillMotionDeviceType{kRoboticsUri, 1012, "SkillMotio
 inline constexpr ModelNode DetachToolSkillType{kToolChangerUri, 1001, "DetachToolSkillType"};
 inline constexpr ModelNode AttachToolSkillType{kToolChangerUri, 1002, "AttachToolSkillType"};
 inline constexpr ModelNode ChangeToolSkillType{kToolChangerUri, 1003, "ChangeToolSkillType"};
+inline constexpr ModelNode DropToolSkillType{kToolChangerUri, 1004, "DropToolSkillType"};
 // urn:pnp:ua:skills:composite
 inline constexpr ModelNode PickAndPlaceSkillType{kCompositeUri, 1001, "PickAndPlaceSkillType"};
 inline constexpr ModelNode ExecuteProcessSkillType{kCompositeUri, 1002, "ExecuteProcessSkillType"};

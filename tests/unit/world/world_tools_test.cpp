@@ -299,3 +299,29 @@ TEST(WorldOperator, ATaskOnAToolOnTheFlangeIsRefused) {
 
 }  // namespace
 }  // namespace pnp::world
+
+namespace pnp::world {
+namespace {
+
+TEST(WorldOperator, LocksAndUnlocksAToolByHand) {
+    World world(thesis());
+    const std::size_t v = toolIndex(world, "vacuum-gripper");
+    EXPECT_NE(world.attachToolByHand("nope", "vacuum-gripper"), "");
+    EXPECT_NE(world.attachToolByHand("ur5", "nope"), "");
+    ASSERT_EQ(world.attachToolByHand("ur5", "vacuum-gripper"), "");
+    EXPECT_EQ(world.robot(0).tool, "vacuum-gripper");
+    EXPECT_EQ(world.robot(0).changer, ChangerLock::kLocked);
+    EXPECT_DOUBLE_EQ(world.robot(0).changerVoltage, 6.7);
+    EXPECT_TRUE(world.toolPowered(v));
+    EXPECT_FALSE(world.tools()[v].dock.has_value());
+    EXPECT_NE(world.attachToolByHand("ur5", "parallel-gripper"), "") << "one at a time";
+    ASSERT_EQ(world.detachToolByHand("ur5"), "");
+    EXPECT_FALSE(world.toolPowered(v));
+    EXPECT_FALSE(world.robot(0).tool.has_value());
+    EXPECT_EQ(world.robot(0).changerVoltage, 0.0);
+    EXPECT_NE(world.detachToolByHand("ur5"), "");
+    EXPECT_EQ(world.putToolInDock("vacuum-gripper", "dock-1"), "");
+}
+
+}  // namespace
+}  // namespace pnp::world

@@ -1,0 +1,859 @@
+#include "component/toolchanger/tool_changer.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <stop_token>
+#include <thread>
+
+#include "component/toolchanger/adc_monitor.hpp"
+#include "component/toolchanger/robot_arm.hpp"
+#include "ua/client/client.hpp"
+#include "ua/discovery/watcher.hpp"
+#include "ua/spatial/spatial.hpp"
+#include "ua/types/extension_object.hpp"
+#include "ua/types/ns0_types_model.hpp"
+
+namespace pnp::component::toolchanger {
+
+using namespace std::chrono_literals;
+using skill::server::Execution;
+using skill::server::Outcome;
+using Clock = std::chrono::steady_clock;
+using Eigen::Isometry3d;
+namespace kelvin = device::kelvin;
+
+namespace {
+
+std::string formatPosition(const Isometry3d& p) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f)", p.translation().x(), p.translation().y(),
+                  p.translation().z());
+    return buf;
+}
+
+std::string formatSeconds(double s) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.3f s", s);
+    return buf;
+}
+
+Isometry3d raised(const Isometry3d& pose, double height) {
+    Isometry3d p = pose;
+    p.translation().z() += height;
+    return p;
+}
+
+// Same dock: positions within 5 mm, orientations within 0.05 rad.
+bool samePose(const Isometry3d& a, const Isometry3d& b) {
+    const double angle = Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle();
+    return (a.translation() - b.translation()).norm() < 0.005 && std::abs(angle) < 0.05;
+}
+
+struct CurrentTool {
+    int id = 0;
+    std::string applicationUri;
+    std::string name;       // ApplicationName
+    std::string endpoint;   // the tool's server
+    std::string toolFrame;  // the name given to the robot's SetTool ("" = none set)
+};
+
+// The outcome of a sequence step: empty = go on.
+struct Stop {
+    skill::SkillResult result = skill::SkillResult::Failed;
+    std::string message;
+};
+
+}  // namespace
+
+struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
+    ua::server::Server& server;
+    ToolChangerOptions options;
+    std::unique_ptr<skill::detector::SkillDetector> detector;
+    std::unique_ptr<skill::server::SkillController> controller;
+    ua::NodeId hasToolNode, toolIdNode, toolDescriptionNode, toolEndpointNode, toolUriNode,
+        conditionNode;
+    ua::UInt16 baseNs = 0;
+
+    std::mutex changeMutex;  // one change at a time, whichever skill runs it
+
+    mutable std::mutex mutex;  // the members below
+    std::shared_ptr<RobotArm> arm;
+    std::shared_ptr<AdcMonitor> adc;
+    std::map<int, Isometry3d> docks;  // tool id -> the dock it was attached from
+    CurrentTool current;
+    std::string conditionText;
+    std::vector<PhaseTime> phases;
+
+    Impl(ua::server::Server& s, ToolChangerOptions o) : server(s), options(std::move(o)) {
+        if (!options.log)
+            options.log = [](const std::string& line) {
+                std::cerr << "pnp component toolchanger: " << line << std::endl;
+            };
+    }
+
+    // ---- the robot, the ADC ----------------------------------------------------------
+    std::string robotUrl(const std::string& override) const {
+        if (!override.empty()) return override;
+        return options.robot == "auto" ? std::string() : options.robot;
+    }
+
+    // The move skill of the robot at `url` ("" = the only one), within findTimeout.
+    std::shared_ptr<RobotArm> robotArm(const std::string& url, std::string& error,
+                                       std::stop_token stop, std::chrono::milliseconds timeout) {
+        const std::string wanted = url.empty() ? "" : ua::discovery::normaliseUrl(url);
+        {
+            std::lock_guard l(mutex);
+            if (arm &&
+                (wanted.empty() || ua::discovery::normaliseUrl(arm->endpointUrl()) == wanted))
+                return arm;
+        }
+        if (!url.empty()) detector->addServer(url);  // known already: a no-op
+        const auto end = Clock::now() + timeout;
+        std::optional<skill::detector::DetectedSkill> found;
+        while (!stop.stop_requested()) {
+            std::set<std::string> endpoints;
+            for (auto& s : detector->find(skill::types::CartesianLinearMoveSkillType)) {
+                const std::string u = ua::discovery::normaliseUrl(s.endpointUrl);
+                if (!wanted.empty() && u != wanted) continue;
+                endpoints.insert(u);
+                if (!found) found = s;
+            }
+            if (endpoints.size() > 1) {
+                error = "several robots offer CartesianLinearMove (";
+                for (const auto& e : endpoints) error += (error.back() == '(' ? "" : ", ") + e;
+                error += "): name one with --robot URL";
+                return nullptr;
+            }
+            if (found || Clock::now() >= end) break;
+            detector->waitUntil(
+                [](const skill::detector::SkillDetector& d) {
+                    return !d.find(skill::types::CartesianLinearMoveSkillType).empty();
+                },
+                50ms);
+        }
+        if (!found) {
+            error = wanted.empty() ? "no robot with a CartesianLinearMove skill found"
+                                   : "no CartesianLinearMove skill found at " + url;
+            return nullptr;
+        }
+        try {
+            auto a = std::make_shared<RobotArm>(*found, options.requestTimeout);
+            std::lock_guard l(mutex);
+            arm = a;
+            return a;
+        } catch (const std::exception& e) {
+            error = "the robot at " + found->endpointUrl + ": " + e.what();
+            return nullptr;
+        }
+    }
+
+    std::shared_ptr<AdcMonitor> adcMonitor(std::string& error, std::stop_token stop,
+                                           std::chrono::milliseconds timeout) {
+        {
+            std::lock_guard l(mutex);
+            if (adc) return adc;
+        }
+        const auto end = Clock::now() + timeout;
+        std::string url = options.adc == "auto" ? "" : options.adc;
+        while (url.empty() && !stop.stop_requested() && Clock::now() < end) {
+            for (const auto& s : detector->servers()) {
+                if (s.status != skill::detector::ServerState::Status::Skills &&
+                    s.status != skill::detector::ServerState::Status::NoSkills)
+                    continue;
+                if (AdcMonitor::isKelvinAdc(s.url, options.requestTimeout)) {
+                    url = s.url;
+                    break;
+                }
+            }
+            if (url.empty()) std::this_thread::sleep_for(50ms);
+        }
+        if (url.empty()) {
+            error =
+                "no Kelvin ADC board (KelvinToolChangerType) found: start `pnp device "
+                "kelvin-adc` or pass --adc URL";
+            return nullptr;
+        }
+        try {
+            auto m = std::make_shared<AdcMonitor>(url, options.requestTimeout);
+            std::lock_guard l(mutex);
+            adc = m;
+            return m;
+        } catch (const std::exception& e) {
+            error = "the Kelvin ADC board at " + url + ": " + e.what();
+            return nullptr;
+        }
+    }
+
+    // ---- published state -----------------------------------------------------------------
+    void publishTool() {
+        CurrentTool t;
+        std::string c;
+        {
+            std::lock_guard l(mutex);
+            t = current;
+            c = conditionText;
+        }
+        auto& space = server.addressSpace();
+        (void)space.setValue(hasToolNode, ua::DataValue(ua::Variant(t.id != 0)));
+        (void)space.setValue(toolIdNode, ua::DataValue(ua::Variant(ua::Int32{t.id})));
+        (void)space.setValue(toolDescriptionNode, ua::DataValue(ua::Variant(ua::String(t.name))));
+        (void)space.setValue(toolEndpointNode, ua::DataValue(ua::Variant(ua::String(t.endpoint))));
+        (void)space.setValue(toolUriNode, ua::DataValue(ua::Variant(ua::String(t.applicationUri))));
+        (void)space.setValue(conditionNode, ua::DataValue(ua::Variant(ua::String(c))));
+    }
+
+    // What the ADC says is on the changer now, into CurrentTool (a tool we did not attach:
+    // its id only).
+    void syncWithAdc(const AdcSample& s) {
+        {
+            std::lock_guard l(mutex);
+            if (!s.valid) return;
+            if (s.reading.state == ChangerState::kTool) {
+                if (current.id != s.reading.toolId)
+                    current = CurrentTool{s.reading.toolId, {}, {}, {}, {}};
+            } else if (s.reading.state == ChangerState::kReady ||
+                       s.reading.state == ChangerState::kNoTool) {
+                current = CurrentTool{};
+            }
+        }
+        publishTool();
+    }
+
+    void setCondition(std::string text) {
+        {
+            std::lock_guard l(mutex);
+            conditionText = std::move(text);
+        }
+        publishTool();
+    }
+
+    // ---- one run -------------------------------------------------------------------------
+    struct Run {
+        std::stop_token stop;
+        std::shared_ptr<RobotArm> arm;
+        std::shared_ptr<AdcMonitor> adc;
+        std::vector<PhaseTime> phases;
+        std::string phase;  // the one running
+        Clock::time_point phaseStart;
+        Isometry3d dock = Isometry3d::Identity();  // the dock the sequence works at
+        std::string prefix;                        // "Detach." / "Attach." within ChangeTool
+        bool halted = false;
+    };
+
+    void beginPhase(Run& r, const std::string& name) {
+        endPhase(r);
+        r.phase = r.prefix + name;
+        r.phaseStart = Clock::now();
+    }
+    void endPhase(Run& r) {
+        if (r.phase.empty()) return;
+        r.phases.push_back(
+            {r.phase, std::chrono::duration<double>(Clock::now() - r.phaseStart).count()});
+        r.phase.clear();
+    }
+
+    // A move; a Stop when it did not complete.
+    std::optional<Stop> move(Run& r, const Isometry3d& target, const std::vector<double>& v) {
+        if (r.stop.stop_requested()) {
+            r.halted = true;
+            return Stop{skill::SkillResult::Aborted, "halted"};
+        }
+        MoveOutcome m = r.arm->moveLinear(target, v, options.moveTimeout, r.stop);
+        if (m.completed) return std::nullopt;
+        if (m.aborted || r.stop.stop_requested()) {
+            r.halted = true;
+            return Stop{skill::SkillResult::Aborted, "halted: " + m.message};
+        }
+        return Stop{skill::SkillResult::Failed,
+                    m.message + " (moving to " + formatPosition(target) + ")"};
+    }
+
+    // Waits for the ADC to show what `pred` wants; the sample it ended on.
+    AdcSample expect(Run& r, const std::function<bool(const AdcSample&)>& pred) {
+        auto s = r.adc->waitFor(pred, options.settleTimeout, r.stop);
+        if (r.stop.stop_requested()) r.halted = true;
+        return s ? *s : r.adc->latest();
+    }
+
+    // Moves back up clear of the dock after a failure; what it could not do, appended.
+    std::string recover(Run& r, const std::vector<Isometry3d>& path) {
+        for (const Isometry3d& p : path) {
+            if (r.stop.stop_requested()) return "; halted while moving clear of the dock";
+            MoveOutcome m = r.arm->moveLinear(p, options.dockVelocity, options.moveTimeout, r.stop);
+            if (!m.completed)
+                return "; could not move clear of the dock: " + m.message + " (to " +
+                       formatPosition(p) + ")";
+        }
+        return {};
+    }
+
+    static bool isReady(const AdcSample& s) {
+        return s.valid && s.reading.state == ChangerState::kReady;
+    }
+    static bool isTool(const AdcSample& s) {
+        return s.valid && s.reading.state == ChangerState::kTool;
+    }
+
+    // The first check of every run: the changer's state now.
+    AdcSample currentState(Run& r) {
+        return expect(r, [](const AdcSample& s) { return s.valid; });
+    }
+
+    // ---- attach --------------------------------------------------------------------------
+    std::optional<Stop> attach(Run& r, const Isometry3d& dock, const std::string& appUri) {
+        r.dock = dock;
+        const Isometry3d open =
+            dock * Eigen::AngleAxisd(-options.lockAngle, Eigen::Vector3d::UnitZ());
+        const Isometry3d openAbove = raised(open, options.liftHeight);
+        const Isometry3d lockedAbove = raised(dock, options.liftHeight);
+        const std::string where = " at the dock " + formatPosition(dock);
+
+        const AdcSample pre = currentState(r);
+        if (r.halted) return Stop{skill::SkillResult::Aborted, "halted"};
+        if (!isReady(pre)) {
+            std::string why;
+            switch (pre.reading.state) {
+                case ChangerState::kTool:
+                    why = "a tool is already attached (" + describe(pre) +
+                          "): detach it first (DetachTool, DropTool) or use ChangeTool";
+                    break;
+                case ChangerState::kNoTool:
+                    why = "the changer is locked without a tool (" + describe(pre) +
+                          "): it must be open to attach a tool";
+                    break;
+                default:
+                    why = "the changer is not open (" + describe(pre) + "); it must read ready";
+            }
+            return Stop{skill::SkillResult::Failed, why};
+        }
+        if (auto e = r.arm->clearTool(""); !e.empty()) return Stop{skill::SkillResult::Failed, e};
+
+        beginPhase(r, "Approach");
+        if (auto s = move(r, openAbove, options.travelVelocity)) return s;
+        if (auto s = move(r, open, options.dockVelocity)) {
+            if (s->result == skill::SkillResult::Failed) s->message += recover(r, {openAbove});
+            return s;
+        }
+        if (const AdcSample s = expect(r, isReady); !isReady(s)) {
+            if (r.halted) return Stop{skill::SkillResult::Aborted, "halted"};
+            return Stop{skill::SkillResult::Failed,
+                        "the changer reads " + describe(s) + " in the open pose" + where +
+                            ", expected ready" + recover(r, {openAbove})};
+        }
+        beginPhase(r, "Lock");
+        if (auto s = move(r, dock, options.dockVelocity)) {
+            if (s->result == skill::SkillResult::Failed)
+                s->message += recover(r, {open, openAbove});
+            return s;
+        }
+        const AdcSample locked = expect(r, isTool);
+        if (!isTool(locked)) {
+            if (r.halted) return Stop{skill::SkillResult::Aborted, "halted"};
+            std::string why;
+            switch (locked.reading.state) {
+                case ChangerState::kNoTool:
+                    why = "no tool in the dock" + where + ": the changer locked empty (" +
+                          describe(locked) + ")";
+                    break;
+                case ChangerState::kReady:
+                    why = "the changer did not turn" + where + " (still " + describe(locked) +
+                          "): is ToolPosition a dock?";
+                    break;
+                default:
+                    why = "the changer did not lock" + where + " (" + describe(locked) + ")";
+            }
+            // Turn the ring back open before leaving, so that nothing stays half locked.
+            return Stop{skill::SkillResult::Failed, why + recover(r, {open, openAbove})};
+        }
+        const int toolId = locked.reading.toolId;
+        const auto lockedAt = Clock::now();
+        beginPhase(r, "Leave");
+        if (auto s = move(r, lockedAbove, options.dockVelocity)) return s;
+        if (const AdcSample s = expect(r, isTool); !isTool(s) || s.reading.toolId != toolId) {
+            if (r.halted) return Stop{skill::SkillResult::Aborted, "halted"};
+            return Stop{
+                skill::SkillResult::Failed,
+                "the tool did not stay on the changer when leaving the dock (" + describe(s) + ")"};
+        }
+        {
+            std::lock_guard l(mutex);
+            docks[toolId] = dock;
+            current = CurrentTool{toolId, appUri, {}, {}, {}};
+        }
+        publishTool();
+
+        if (appUri.empty()) {
+            endPhase(r);
+            return std::nullopt;
+        }
+        beginPhase(r, "ToolDetected");
+        std::vector<skill::detector::DetectedSkill> toolSkills;
+        const auto end = Clock::now() + options.toolDetectTimeout;
+        auto ofTool = [&appUri](const skill::detector::SkillDetector& d) {
+            std::vector<skill::detector::DetectedSkill> out;
+            for (auto& s : d.all())
+                if (s.componentUri == appUri) out.push_back(s);
+            return out;
+        };
+        while (!r.stop.stop_requested()) {
+            toolSkills = ofTool(*detector);
+            if (!toolSkills.empty() || Clock::now() >= end) break;
+            detector->waitUntil([&](const auto& d) { return !ofTool(d).empty(); }, 50ms);
+        }
+        if (r.stop.stop_requested()) {
+            r.halted = true;
+            return Stop{skill::SkillResult::Aborted, "halted"};
+        }
+        if (toolSkills.empty())
+            return Stop{skill::SkillResult::Failed,
+                        "tool " + std::to_string(toolId) + " is locked, but no server " + appUri +
+                            " with skills was detected within " +
+                            std::to_string(options.toolDetectTimeout.count()) + " ms"};
+        const double detectedAfterLock =
+            std::chrono::duration<double>(Clock::now() - lockedAt).count();
+        endPhase(r);
+        const auto& first = toolSkills.front();
+        std::string frameName =
+            first.componentName.empty() ? "tool-" + std::to_string(toolId) : first.componentName;
+        std::string note;
+        if (auto offset = gripOffset(toolSkills)) {
+            if (auto e = r.arm->setTool(frameName, *offset); !e.empty())
+                return Stop{skill::SkillResult::Failed,
+                            "tool " + std::to_string(toolId) + " attached, but " + e};
+        } else {
+            frameName.clear();
+            note = "; the tool has no IGripperType grip point: the robot's tool frame is not set";
+        }
+        {
+            std::lock_guard l(mutex);
+            current =
+                CurrentTool{toolId, appUri, first.componentName, first.endpointUrl, frameName};
+        }
+        publishTool();
+        options.log("tool " + std::to_string(toolId) + " (" + appUri + ") detected " +
+                    formatSeconds(detectedAfterLock) + " after the lock" + note);
+        return std::nullopt;
+    }
+
+    // GripPoints/GripPoint_1/Offset (else the first grip point) below a controller of the
+    // tool's server (IGripperType); nullopt when there is none.
+    std::optional<Isometry3d> gripOffset(
+        const std::vector<skill::detector::DetectedSkill>& skills) {
+        std::set<std::pair<std::string, std::string>> seen;
+        for (const auto& s : skills) {
+            if (!seen.insert({s.endpointUrl, s.controller.toString()}).second) continue;
+            try {
+                ua::client::ClientConfig cc;
+                cc.applicationName = "pnp tool changer";
+                cc.applicationUri = "urn:pnp:component:toolchanger:tool-client";
+                cc.requestTimeout = options.requestTimeout;
+                cc.connectTimeout = options.requestTimeout;
+                ua::client::Client c(cc);
+                c.connect(s.endpointUrl);
+                const ua::UInt16 base = c.namespaceIndex(skill::kBaseUri);
+                auto childNamed = [&](const ua::NodeId& parent, const std::string& name,
+                                      bool prefix) -> std::optional<ua::NodeId> {
+                    std::optional<ua::NodeId> firstMatch;
+                    for (const auto& r : c.browse(parent)) {
+                        if (r.nodeId.serverIndex != 0) continue;
+                        if (r.browseName.name == name) return r.nodeId.nodeId;
+                        if (prefix && !firstMatch && r.browseName.namespaceIndex == base &&
+                            r.browseName.name.starts_with("GripPoint_"))
+                            firstMatch = r.nodeId.nodeId;
+                    }
+                    return firstMatch;
+                };
+                auto points = childNamed(s.controller, "GripPoints", false);
+                if (!points) continue;
+                auto point = childNamed(*points, "GripPoint_1", true);
+                if (!point) continue;
+                auto offset = childNamed(*point, "Offset", false);
+                if (!offset) continue;
+                const ua::Variant v = c.readValue(*offset);
+                const auto* x = v.scalar<ua::ExtensionObject>();
+                if (x == nullptr) continue;
+                auto f = ua::fromExtensionObject<ua::ThreeDFrame>(*x);
+                if (!f || !ua::spatial::finite(*f)) continue;
+                return ua::spatial::toIsometry(*f);
+            } catch (const std::exception& e) {
+                options.log("reading the grip point of " + s.endpointUrl + ": " + e.what());
+            }
+        }
+        return std::nullopt;
+    }
+
+    // ---- detach --------------------------------------------------------------------------
+    std::optional<Stop> detach(Run& r, const Isometry3d& dock) {
+        r.dock = dock;
+        const Isometry3d open =
+            dock * Eigen::AngleAxisd(-options.lockAngle, Eigen::Vector3d::UnitZ());
+        const Isometry3d openAbove = raised(open, options.liftHeight);
+        const Isometry3d lockedAbove = raised(dock, options.liftHeight);
+        const std::string where = " at the dock " + formatPosition(dock);
+
+        const AdcSample pre = currentState(r);
+        if (r.halted) return Stop{skill::SkillResult::Aborted, "halted"};
+        if (!isTool(pre)) {
+            std::string why = pre.valid && (pre.reading.state == ChangerState::kReady ||
+                                            pre.reading.state == ChangerState::kNoTool)
+                                  ? "no tool attached (" + describe(pre) + ")"
+                                  : "the changer holds no locked tool (" + describe(pre) + ")";
+            return Stop{skill::SkillResult::Failed, why};
+        }
+        const int toolId = pre.reading.toolId;
+        if (auto e = r.arm->clearTool(""); !e.empty()) return Stop{skill::SkillResult::Failed, e};
+
+        beginPhase(r, "Approach");
+        if (auto s = move(r, lockedAbove, options.travelVelocity)) return s;
+        if (auto s = move(r, dock, options.dockVelocity)) {
+            if (s->result == skill::SkillResult::Failed) s->message += recover(r, {lockedAbove});
+            return s;
+        }
+        beginPhase(r, "Unlock");
+        if (auto s = move(r, open, options.dockVelocity)) {
+            if (s->result == skill::SkillResult::Failed)
+                s->message += recover(r, {dock, lockedAbove});
+            return s;
+        }
+        const AdcSample opened = expect(r, isReady);
+        if (!isReady(opened)) {
+            if (r.halted) return Stop{skill::SkillResult::Aborted, "halted"};
+            std::string why =
+                isTool(opened) ? "the changer did not open" + where + " (still " +
+                                     describe(opened) + "): is ToolPosition this tool's dock?"
+                               : "the changer did not open" + where + " (" + describe(opened) + ")";
+            // Turn back (the tool stays locked on the flange) and leave.
+            return Stop{skill::SkillResult::Failed, why + recover(r, {dock, lockedAbove})};
+        }
+        beginPhase(r, "Leave");
+        if (auto s = move(r, openAbove, options.dockVelocity)) return s;
+        endPhase(r);
+        const AdcSample after = expect(r, isReady);
+        std::string frame;
+        {
+            std::lock_guard l(mutex);
+            frame = current.toolFrame;
+            current = CurrentTool{};
+        }
+        publishTool();
+        if (!frame.empty())
+            if (auto e = r.arm->clearTool(frame); !e.empty()) options.log(e);
+        if (!isReady(after))
+            return Stop{skill::SkillResult::Failed, "after leaving the dock the changer reads " +
+                                                        describe(after) +
+                                                        ", expected ready: did tool " +
+                                                        std::to_string(toolId) + " come along?"};
+        return std::nullopt;
+    }
+
+    // ---- the skills ------------------------------------------------------------------------
+    enum class Kind { Change, Attach, Detach, Drop };
+
+    Outcome run(Kind kind, Execution& exec) {
+        const ua::NodeId skillNode = skillNodes.at(static_cast<int>(kind));
+        std::unique_lock busy(changeMutex, std::try_to_lock);
+        if (!busy.owns_lock()) return Outcome::failed("another tool change is running");
+        Run r;
+        r.stop = exec.stopToken();
+        const ua::Variant* position = exec.value("ToolPosition");
+        const ua::Variant* uri = exec.value("ToolAppUri");
+        const ua::Variant* endpoint = exec.value("MoveSkillControllerEndpoint");
+        Isometry3d dock = Isometry3d::Identity();
+        if (position != nullptr) {
+            ua::ThreeDFrame f;
+            if (!skill::server::ParamTraits<ua::ThreeDFrame>::fromVariant(*position, f) ||
+                !ua::spatial::finite(f))
+                return Outcome::failed("ToolPosition is not a finite ThreeDFrame");
+            dock = ua::spatial::toIsometry(f);
+        }
+        std::string appUri;
+        if (uri != nullptr)
+            if (const auto* s = uri->scalar<ua::String>()) appUri = *s;
+        std::string moveEndpoint;
+        if (endpoint != nullptr)
+            if (const auto* s = endpoint->scalar<ua::String>()) moveEndpoint = *s;
+
+        std::string error;
+        r.arm = robotArm(robotUrl(moveEndpoint), error, r.stop, options.findTimeout);
+        if (!r.arm) return Outcome::failed(error);
+        r.adc = adcMonitor(error, r.stop, options.findTimeout);
+        if (!r.adc) return Outcome::failed(error);
+        const std::string before = condition();
+
+        std::optional<Stop> stop;
+        std::string done;
+        const auto started = Clock::now();
+        switch (kind) {
+            case Kind::Attach:
+                stop = attach(r, dock, appUri);
+                done = "attached";
+                break;
+            case Kind::Detach:
+                stop = detach(r, dock);
+                done = "detached";
+                break;
+            case Kind::Drop:
+            case Kind::Change: {
+                const AdcSample s = currentState(r);
+                if (r.halted) {
+                    stop = Stop{skill::SkillResult::Aborted, "halted"};
+                    break;
+                }
+                syncWithAdc(s);
+                std::optional<Isometry3d> from;
+                CurrentTool cur;
+                {
+                    std::lock_guard l(mutex);
+                    cur = current;
+                    if (auto it = docks.find(s.reading.toolId); it != docks.end())
+                        from = it->second;
+                }
+                if (kind == Kind::Drop) {
+                    if (!isTool(s)) {
+                        stop = Stop{skill::SkillResult::Failed,
+                                    "no tool attached (" + describe(s) + ")"};
+                    } else if (!from) {
+                        stop = Stop{skill::SkillResult::Failed,
+                                    "tool " + std::to_string(s.reading.toolId) +
+                                        " was not attached by this component: where it came "
+                                        "from is unknown (DetachTool with its ToolPosition)"};
+                    } else {
+                        stop = detach(r, *from);
+                    }
+                    done = "dropped";
+                    break;
+                }
+                if (isTool(s)) {
+                    if (from && samePose(*from, dock) && !appUri.empty() &&
+                        cur.applicationUri == appUri) {
+                        done = "already attached";
+                        break;
+                    }
+                    if (!from) {
+                        stop = Stop{skill::SkillResult::Failed,
+                                    "tool " + std::to_string(s.reading.toolId) +
+                                        " is attached and where it came from is unknown: "
+                                        "DetachTool with its ToolPosition first"};
+                        break;
+                    }
+                    if (samePose(*from, dock)) {
+                        stop = Stop{skill::SkillResult::Failed,
+                                    "ToolPosition is the dock the attached tool " +
+                                        std::to_string(s.reading.toolId) + " came from"};
+                        break;
+                    }
+                    r.prefix = "Detach.";
+                    stop = detach(r, *from);
+                    if (stop) break;
+                    r.prefix = "Attach.";
+                }
+                stop = attach(r, dock, appUri);
+                done = "changed to tool";
+                break;
+            }
+        }
+        endPhase(r);
+        const double total = std::chrono::duration<double>(Clock::now() - started).count();
+        {
+            std::lock_guard l(mutex);
+            phases = r.phases;
+        }
+        std::vector<ua::String> names;
+        std::vector<double> seconds;
+        std::string phaseText;
+        for (const auto& p : r.phases) {
+            names.push_back(p.name);
+            seconds.push_back(p.seconds);
+            phaseText += (phaseText.empty() ? "" : ", ") + p.name + " " + formatSeconds(p.seconds);
+        }
+        const bool halted = r.halted || (stop && stop->result == skill::SkillResult::Aborted);
+        if (halted) {
+            // The robot is at rest now; what the changer reads reaches us through the board's
+            // poll and the subscription: give it a few notifications (bounded).
+            const std::uint64_t seen = r.adc->latest().updates;
+            (void)r.adc->waitFor([seen](const AdcSample& s) { return s.updates >= seen + 6; },
+                                 std::min<std::chrono::milliseconds>(options.settleTimeout, 200ms));
+        }
+        const AdcSample now = r.adc->latest();
+        syncWithAdc(now);
+        if (halted) {
+            std::string report = "halted during " +
+                                 (r.phase.empty() && !r.phases.empty() ? r.phases.back().name
+                                                                       : std::string("the start")) +
+                                 " at the dock " + formatPosition(r.dock) + ": changer " +
+                                 describe(now);
+            if (!now.valid || now.reading.state == ChangerState::kIntermediate)
+                report +=
+                    ": the tool may be half locked; turn the changer back by hand or run "
+                    "AttachTool / DetachTool at this dock";
+            setCondition(report);
+            writeFinalMessage(skillNode, report);
+            options.log(report);
+            return Outcome::aborted(report)
+                .with("Phases", ua::Variant(names))
+                .with("PhaseDurations", ua::Variant(seconds));
+        }
+        if (stop) {
+            if (!before.empty()) stop->message += " (earlier: " + before + ")";
+            options.log("failed: " + stop->message + (phaseText.empty() ? "" : "; " + phaseText));
+            return Outcome::failed(stop->message)
+                .with("Phases", ua::Variant(names))
+                .with("PhaseDurations", ua::Variant(seconds));
+        }
+        setCondition("");
+        CurrentTool cur;
+        {
+            std::lock_guard l(mutex);
+            cur = current;
+        }
+        std::string message = done;
+        if (kind == Kind::Change || kind == Kind::Attach)
+            message +=
+                " " + std::to_string(cur.id) + (cur.name.empty() ? "" : " (" + cur.name + ")");
+        message += " in " + formatSeconds(total) + (phaseText.empty() ? "" : ": " + phaseText);
+        options.log(message);
+        return Outcome::completed(message)
+            .with("Phases", ua::Variant(names))
+            .with("PhaseDurations", ua::Variant(seconds));
+    }
+
+    // FinalResultData/Message of the halted skill: Halt set it at once ("halted"); what the
+    // halt left behind is known once the robot is at rest (the Reset waits for that).
+    void writeFinalMessage(const ua::NodeId& skillNode, const std::string& text) {
+        auto& space = server.addressSpace();
+        const ua::QualifiedName path[] = {ua::QualifiedName(0, "FinalResultData"),
+                                          ua::QualifiedName(baseNs, "Message")};
+        if (auto id = space.resolvePath(skillNode, path))
+            (void)space.setValue(*id, ua::DataValue(ua::Variant(ua::String(text))));
+    }
+    std::map<int, ua::NodeId> skillNodes;  // by Kind (set before the server starts)
+    ua::NodeId node;                       // DeviceSet/<name>
+
+    std::string condition() const {
+        std::lock_guard l(mutex);
+        return conditionText;
+    }
+};
+
+namespace {
+
+std::shared_ptr<skill::server::Skill> makeToolSkill(
+    std::weak_ptr<ToolChangerComponent::Impl> weak, skill::ModelNode type, int kind,
+    std::vector<skill::server::ParameterDeclaration> params) {
+    using skill::server::SkillCallbacks;
+    SkillCallbacks cb;
+    cb.execute = [weak, kind](Execution& exec) -> Outcome {
+        auto impl = weak.lock();
+        if (!impl) return Outcome::failed("the component is shutting down");
+        return impl->run(static_cast<ToolChangerComponent::Impl::Kind>(kind), exec);
+    };
+    cb.reset = [weak]() -> ua::StatusCode {
+        if (auto impl = weak.lock()) {
+            const std::string c = impl->condition();
+            if (!c.empty()) impl->options.log("reset; the changer was left: " + c);
+        }
+        return {};
+    };
+    return skill::server::makeSkill(type, std::move(params), std::move(cb));
+}
+
+}  // namespace
+
+ToolChangerComponent::ToolChangerComponent(ua::server::Server& server, ToolChangerOptions options,
+                                           mdns::Mdns* mdns)
+    : impl_(std::make_shared<Impl>(server, std::move(options))) {
+    Impl& m = *impl_;
+    auto& space = server.addressSpace();
+    skill::server::loadSkillModels(space, {skill::kBaseUri, skill::kToolChangerUri});
+    m.baseNs = *space.namespaceIndex(skill::kBaseUri);
+    const ua::UInt16 tc = *space.namespaceIndex(skill::kToolChangerUri);
+    m.controller = std::make_unique<skill::server::SkillController>(
+        server, skill::server::SkillControllerOptions{.name = m.options.name,
+                                                      .type = types::ToolChangerType});
+    const ua::NodeId node = m.controller->node();
+    m.node = node;
+    auto child = [&](std::initializer_list<const char*> names) {
+        std::vector<ua::QualifiedName> path;
+        for (const char* n : names) path.emplace_back(tc, n);
+        auto id = space.resolvePath(node, path);
+        if (!id)
+            throw skill::server::SkillError(std::string("ToolChangerType instance without ") +
+                                            *(names.end() - 1));
+        return *id;
+    };
+    m.hasToolNode = child({"HasTool"});
+    m.toolIdNode = child({"CurrentTool", "Id"});
+    m.toolDescriptionNode = child({"CurrentTool", "Description"});
+    m.toolEndpointNode = child({"CurrentTool", "Endpoint"});
+    m.toolUriNode = child({"CurrentTool", "ApplicationUri"});
+    m.conditionNode = child({"Condition"});
+    m.publishTool();
+
+    using skill::server::declareParameter;
+    auto frame = [] { return declareParameter<ua::ThreeDFrame>("ToolPosition"); };
+    auto uri = [] { return declareParameter<ua::String>("ToolAppUri", ""); };
+    auto endpoint = [] { return declareParameter<ua::String>("MoveSkillControllerEndpoint", ""); };
+    using K = Impl::Kind;
+    std::weak_ptr<Impl> weak = impl_;
+    auto add = [&](const char* name, const skill::ModelNode& type, K kind,
+                   std::vector<skill::server::ParameterDeclaration> params) {
+        const int k = static_cast<int>(kind);
+        m.skillNodes[k] =
+            m.controller->add(name, makeToolSkill(weak, type, k, std::move(params))).node();
+    };
+    add(skill_names::ChangeTool, skill::types::ChangeToolSkillType, K::Change,
+        {frame(), uri(), endpoint()});
+    add(skill_names::AttachTool, skill::types::AttachToolSkillType, K::Attach,
+        {frame(), uri(), endpoint()});
+    add(skill_names::DetachTool, skill::types::DetachToolSkillType, K::Detach,
+        {frame(), endpoint()});
+    add(skill_names::DropTool, types::DropToolSkillType, K::Drop, {});
+    m.detector = std::make_unique<skill::detector::SkillDetector>(mdns, m.options.detector);
+}
+
+ToolChangerComponent::~ToolChangerComponent() { stop(); }
+
+void ToolChangerComponent::start() {
+    impl_->detector->start();
+    if (impl_->options.robot != "auto" && !impl_->options.robot.empty())
+        impl_->detector->addServer(impl_->options.robot);
+}
+
+void ToolChangerComponent::stop() {
+    if (impl_->controller) impl_->controller.reset();  // halts a running change, joins it
+    impl_->detector->stop();
+    std::lock_guard l(impl_->mutex);
+    impl_->arm.reset();
+    impl_->adc.reset();
+}
+
+std::string ToolChangerComponent::waitReady(std::chrono::milliseconds timeout) {
+    std::string error;
+    auto arm = impl_->robotArm(impl_->robotUrl(""), error, {}, timeout);
+    std::shared_ptr<AdcMonitor> adc;
+    if (arm) adc = impl_->adcMonitor(error, {}, timeout);
+    if (!arm || !adc) return error;
+    if (auto s = adc->waitFor([](const AdcSample& s) { return s.valid; }, timeout); s)
+        impl_->syncWithAdc(*s);
+    return {};
+}
+
+skill::detector::SkillDetector& ToolChangerComponent::detector() { return *impl_->detector; }
+const ua::NodeId& ToolChangerComponent::node() const { return impl_->node; }
+std::vector<skill::server::SkillHandle> ToolChangerComponent::skills() const {
+    if (!impl_->controller) return {};
+    return impl_->controller->skills();
+}
+std::string ToolChangerComponent::condition() const { return impl_->condition(); }
+std::vector<PhaseTime> ToolChangerComponent::lastPhases() const {
+    std::lock_guard l(impl_->mutex);
+    return impl_->phases;
+}
+
+}  // namespace pnp::component::toolchanger
