@@ -117,16 +117,19 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         const auto end = Clock::now() + timeout;
         std::optional<skill::detector::DetectedSkill> found;
         while (!stop.stop_requested()) {
-            std::set<std::string> endpoints;
+            // One robot per ApplicationUri: a server found by mDNS and by an LDS shows up
+            // under two URLs (host name and address), and is still one robot.
+            std::map<std::string, std::string> robots;  // ApplicationUri (else URL) -> URL
             for (auto& s : detector->find(skill::types::CartesianLinearMoveSkillType)) {
                 const std::string u = ua::discovery::normaliseUrl(s.endpointUrl);
                 if (!wanted.empty() && u != wanted) continue;
-                endpoints.insert(u);
+                robots.emplace(s.componentUri.empty() ? u : s.componentUri, u);
                 if (!found) found = s;
             }
-            if (endpoints.size() > 1) {
+            if (robots.size() > 1) {
                 error = "several robots offer CartesianLinearMove (";
-                for (const auto& e : endpoints) error += (error.back() == '(' ? "" : ", ") + e;
+                for (const auto& [uri, e] : robots)
+                    error += (error.back() == '(' ? "" : ", ") + e;
                 error += "): name one with --robot URL";
                 return nullptr;
             }
