@@ -2,6 +2,7 @@
 // vendor-neutral robot::Controller and Planner, shown by RobotDevice as an OPC 40010-1
 // MotionDeviceSystem with the move skills (src/device/robot/README.md). Registers with
 // discovery like every pnp server; runs until SIGINT / SIGTERM, then halts any motion.
+// Also what every device and component command shares (device_commands.hpp).
 #include <signal.h>
 
 #include <CLI/CLI.hpp>
@@ -22,6 +23,7 @@
 
 #include "commands.hpp"
 #include "device/robot/robot_device.hpp"
+#include "device_commands.hpp"
 #include "discovery_commands.hpp"
 #include "output.hpp"
 #include "robot/controller.hpp"
@@ -68,32 +70,13 @@ std::pair<std::string, std::uint16_t> splitHostPort(const std::string& text) {
     return {host, static_cast<std::uint16_t>(p)};
 }
 
-// "x,y,z,a,b,c": six finite numbers (m, rad about the fixed X, Y, Z axes).
-Eigen::Isometry3d parseFrame(const std::string& text) {
-    std::vector<double> v;
-    std::stringstream in(text);
-    std::string item;
-    while (std::getline(in, item, ',')) {
-        char* end = nullptr;
-        const double d = std::strtod(item.c_str(), &end);
-        if (item.empty() || *end != '\0' || !std::isfinite(d))
-            throw UsageError("--world-to-base: \"" + item + "\" is not a finite number");
-        v.push_back(d);
-    }
-    if (v.size() != 6)
-        throw UsageError("--world-to-base expects x,y,z,a,b,c (6 numbers), got \"" + text + "\"");
-    ua::ThreeDFrame f;
-    f.cartesianCoordinates = {v[0], v[1], v[2]};
-    f.orientation = {v[3], v[4], v[5]};
-    return ua::spatial::toIsometry(f);
-}
-
 int runUrDevice(UrDeviceOptions& o) {
     const auto [host, port] = splitHostPort(o.controller);
     auto model = device::ur::modelByName(o.model);
     if (!model) throw UsageError("--model: unknown arm \"" + o.model + "\" (ur3, ur5, ur10)");
-    const Eigen::Isometry3d worldToBase =
-        o.worldToBase.empty() ? Eigen::Isometry3d::Identity() : parseFrame(o.worldToBase);
+    const Eigen::Isometry3d worldToBase = o.worldToBase.empty()
+                                              ? Eigen::Isometry3d::Identity()
+                                              : parseFrame("--world-to-base", o.worldToBase);
     // The device's name is also the server's ApplicationName (and mDNS instance).
     std::string& name = o.serve.discovery.name;
     if (name.empty()) name = model->name;
@@ -126,54 +109,69 @@ int runUrDevice(UrDeviceOptions& o) {
     pc.defaults = limits;
     robot::Planner planner(pc);
 
-    ua::server::ServerConfig config;
-    config.host = o.serve.host;
-    config.port = o.serve.port;
-    applyDiscoveryConfig(config, o.serve.discovery, false);
-    ua::server::Server server(config);
-    std::unique_ptr<device::robot::RobotDevice> device;
-    try {
-        device = std::make_unique<device::robot::RobotDevice>(
-            server, controller, planner,
-            device::robot::RobotDeviceOptions{.name = name,
-                                              .identity = device::robot::identityOf(hardware)});
-        server.start();
-    } catch (const std::exception& e) {
-        std::cerr << "error: " << e.what() << "\n";
-        device.reset();
-        controller.stop();
-        return kExitUaError;
-    }
-    std::cout << "listening on " << server.endpointUrl() << std::endl;  // flushed
-    std::unique_ptr<DiscoveryRuntime> discovery;
-    try {
-        discovery = std::make_unique<DiscoveryRuntime>(server, o.serve.discovery);
-    } catch (const std::exception& e) {
-        std::cerr << "error: discovery: " << e.what() << "\n";
-        device.reset();
-        server.stop();
-        controller.stop();
-        return kExitUaError;
-    }
-    std::cerr << "pnp device ur: " << name << " (" << model->name << ") at " << hardware.endpoint();
-    if (auto v = hardware.controllerVersion())
-        std::cerr << ", controller software " << v->major << "." << v->minor << "." << v->bugfix;
-    std::cerr << "; DeviceSet/" << name << "System with the move skills; " << discovery->status()
-              << "; stop with Ctrl-C or SIGTERM" << std::endl;
-
-    int sig = 0;
-    while (sigwait(&stopSignals, &sig) != 0) {
-    }
-    std::cerr << "pnp device ur: " << (sig == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping"
-              << std::endl;
-    discovery.reset();  // unregisters first: the device disappears everywhere at once
-    device.reset();     // halts running skills: the arm brakes to rest
-    server.stop();
-    controller.stop();
-    return kExitOk;
+    const int rc = serveUntilStopped(
+        o.serve, stopSignals, "pnp device ur",
+        [&](ua::server::Server& server) {
+            return std::make_unique<device::robot::RobotDevice>(
+                server, controller, planner,
+                device::robot::RobotDeviceOptions{.name = name,
+                                                  .identity = device::robot::identityOf(hardware)});
+        },
+        [&](device::robot::RobotDevice&, const std::string& discoveryStatus) {
+            std::cerr << "pnp device ur: " << name << " (" << model->name << ") at "
+                      << hardware.endpoint();
+            if (auto v = hardware.controllerVersion())
+                std::cerr << ", controller software " << v->major << "." << v->minor << "."
+                          << v->bugfix;
+            std::cerr << "; DeviceSet/" << name << "System with the move skills; "
+                      << discoveryStatus << "; stop with Ctrl-C or SIGTERM" << std::endl;
+        });
+    controller.stop();  // after the device: a running move was halted (the arm brakes to rest)
+    return rc;
 }
 
 }  // namespace
+
+void addServerOptions(CLI::App* cmd, ServeOptions& serve, const std::string& portNames,
+                      const std::string& portHelp) {
+    cmd->add_option(portNames, serve.port, portHelp)->capture_default_str();
+    cmd->add_option("--host", serve.host, "address to listen on")->capture_default_str();
+    addDiscoveryOptions(cmd, serve.discovery, false);
+}
+
+ua::server::ServerConfig serverConfig(const ServeOptions& serve) {
+    ua::server::ServerConfig config;
+    config.host = serve.host;
+    config.port = serve.port;
+    applyDiscoveryConfig(config, serve.discovery, false);
+    return config;
+}
+
+Eigen::Isometry3d parseFrame(const std::string& option, const std::string& text) {
+    std::vector<double> v;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ',')) {
+        char* end = nullptr;
+        const double d = std::strtod(item.c_str(), &end);
+        if (item.empty() || *end != '\0' || !std::isfinite(d))
+            throw UsageError(option + ": \"" + item + "\" is not a finite number");
+        v.push_back(d);
+    }
+    if (v.size() != 6)
+        throw UsageError(option + " expects x,y,z,a,b,c (6 numbers), got \"" + text + "\"");
+    ua::ThreeDFrame f;
+    f.cartesianCoordinates = {v[0], v[1], v[2]};
+    f.orientation = {v[3], v[4], v[5]};
+    return ua::spatial::toIsometry(f);
+}
+
+void waitForStopSignal(const sigset_t& stopSignals, const std::string& who) {
+    int sig = 0;
+    while (sigwait(&stopSignals, &sig) != 0) {
+    }
+    std::cerr << who << ": " << (sig == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping" << std::endl;
+}
 
 std::function<int()> addKelvinAdcCommand(CLI::App& device);  // toolchanger_commands.cpp
 
@@ -202,10 +200,7 @@ std::function<int()> addDeviceCommands(CLI::App& app) {
         ->capture_default_str()
         ->check(CLI::Range(100, 600000));
     ur->add_option("--serial-number", o->serialNumber, "the arm's serial number (shown as such)");
-    ur->add_option("--port", o->serve.port, "OPC UA TCP port (0: any free port)")
-        ->capture_default_str();
-    ur->add_option("--host", o->serve.host, "address to listen on")->capture_default_str();
-    addDiscoveryOptions(ur, o->serve.discovery, false);
+    addServerOptions(ur, o->serve);
     // The discovery options' --name names the device too (BrowseNames, ApplicationName).
     ur->get_option("--name")->description(
         "the device's name: DeviceSet/<NAME>System, MotionDevices/<NAME>; also the "

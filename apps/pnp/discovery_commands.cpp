@@ -86,25 +86,27 @@ void applyDiscoveryConfig(ua::server::ServerConfig& config, const DiscoveryOptio
     d.registrationExpiry = std::chrono::milliseconds(o.expiryMs);
 }
 
+MdnsScope mdnsScope(const std::string& host, const std::vector<std::string>& mdnsInterfaces) {
+    MdnsScope scope{.multicast = true, .interfaces = mdnsInterfaces};
+    if (!scope.interfaces.empty() || isWildcard(host)) return scope;
+    // Listening on one address: announce and look only where we can be reached.
+    if (isLoopback(host))
+        scope.multicast = false;
+    else if (auto ifname = interfaceOf(host); !ifname.empty())
+        scope.interfaces = {ifname};
+    return scope;
+}
+
 DiscoveryRuntime::DiscoveryRuntime(ua::server::Server& server, const DiscoveryOptions& o) {
     const auto& config = server.config();
     const bool lds = config.discovery.localDiscoveryServer;
     const bool registering = !o.noRegister && !(lds && !o.ldsMe && o.lds.empty());
     // `pnp lds` registers nowhere unless told (--lds); `pnp ua serve` does by default.
-    std::vector<std::string> interfaces = o.mdnsInterfaces;
-    bool multicast = true;
-    if (interfaces.empty() && !isWildcard(config.host)) {
-        // Listening on one address: announce and look only where we can be reached.
-        if (isLoopback(config.host)) {
-            multicast = false;
-            status_ = "listening on loopback only: no mDNS";
-        } else if (auto ifname = interfaceOf(config.host); !ifname.empty()) {
-            interfaces = {ifname};
-        }
-    }
-    const bool needMdns = multicast && (lds || (registering && o.lds.empty()));
+    const MdnsScope scope = mdnsScope(config.host, o.mdnsInterfaces);
+    if (!scope.multicast) status_ = kLoopbackNoMdns;
+    const bool needMdns = scope.multicast && (lds || (registering && o.lds.empty()));
     if (needMdns) {
-        mdns_ = std::make_unique<mdns::Mdns>(mdnsConfig(interfaces, o.mdnsPort, o.mdnsTtl));
+        mdns_ = std::make_unique<mdns::Mdns>(mdnsConfig(scope.interfaces, o.mdnsPort, o.mdnsTtl));
         mdns_->start();
     }
     if (lds && mdns_) {

@@ -4,6 +4,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "commands.hpp"
 #include "mdns/mdns.hpp"
@@ -28,9 +29,19 @@ void applyDiscoveryConfig(ua::server::ServerConfig& config, const DiscoveryOptio
 // mDNS on these interfaces (empty: by the default rules), UDP port, TTL of our records (s).
 mdns::MdnsConfig mdnsConfig(const std::vector<std::string>& interfaces, int port, int ttl);
 
+// Where a server listening on `host` announces itself and looks for LDS-MEs: the
+// --mdns-interface list if given; else the interface that owns the address (all for a
+// wildcard address: `interfaces` empty); no multicast at all on a loopback address.
+struct MdnsScope {
+    bool multicast = true;
+    std::vector<std::string> interfaces;  // empty: mDNS's default rules
+};
+MdnsScope mdnsScope(const std::string& host, const std::vector<std::string>& mdnsInterfaces);
+inline constexpr const char* kLoopbackNoMdns = "listening on loopback only: no mDNS";
+
 // Started after server.start(); the destructor unregisters, sends goodbyes and stops mDNS.
 // mDNS runs on the interfaces the server is reachable on (all for 0.0.0.0, the address's
-// interface otherwise, none for loopback) unless --mdns-interface names them.
+// interface otherwise, none for loopback: mdnsScope) unless --mdns-interface names them.
 class DiscoveryRuntime {
   public:
     DiscoveryRuntime(ua::server::Server& server, const DiscoveryOptions& options);

@@ -3,26 +3,23 @@
 // ToolAdapter only while the gripper answers (the tool's power: plugged in on the tool
 // changer). Discovery like every pnp server: registered with the LDS-ME (found by mDNS, or
 // --lds) while serving, unregistered when the gripper goes. Runs until SIGINT / SIGTERM.
-#include <arpa/inet.h>
-#include <ifaddrs.h>
 #include <signal.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <chrono>
-#include <cmath>
 #include <cstdio>
 #include <functional>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "commands.hpp"
 #include "device/gripper/tool_adapter.hpp"
 #include "device/robotiq/robotiq_hardware.hpp"
+#include "device_commands.hpp"
 #include "discovery_commands.hpp"
 #include "output.hpp"
 #include "ua/discovery/registrar.hpp"
@@ -53,49 +50,6 @@ struct GripperAdapterOptions {
     double speed = 0.05;
 };
 
-// "x,y,z,a,b,c": six finite numbers (m, rad about the fixed X, Y, Z axes).
-Eigen::Isometry3d parseOffset(const std::string& text) {
-    std::vector<double> v;
-    std::stringstream in(text);
-    std::string item;
-    while (std::getline(in, item, ',')) {
-        char* end = nullptr;
-        const double d = std::strtod(item.c_str(), &end);
-        if (item.empty() || *end != '\0' || !std::isfinite(d))
-            throw UsageError("--offset: \"" + item + "\" is not a finite number");
-        v.push_back(d);
-    }
-    if (v.size() != 6)
-        throw UsageError("--offset expects x,y,z,a,b,c (6 numbers), got \"" + text + "\"");
-    ua::ThreeDFrame f;
-    f.cartesianCoordinates = {v[0], v[1], v[2]};
-    f.orientation = {v[3], v[4], v[5]};
-    return ua::spatial::toIsometry(f);
-}
-
-bool isLoopbackHost(const std::string& host) {
-    return host == "localhost" || host.rfind("127.", 0) == 0 || host == "::1";
-}
-bool isWildcardHost(const std::string& host) {
-    return host.empty() || host == "0.0.0.0" || host == "::";
-}
-// The interface that owns an IPv4 address, or "".
-std::string interfaceOfAddress(const std::string& address) {
-    in_addr want{};
-    if (::inet_pton(AF_INET, address.c_str(), &want) != 1) return {};
-    ifaddrs* list = nullptr;
-    if (::getifaddrs(&list) != 0) return {};
-    std::string name;
-    for (auto* i = list; i; i = i->ifa_next)
-        if (i->ifa_addr && i->ifa_addr->sa_family == AF_INET &&
-            reinterpret_cast<sockaddr_in*>(i->ifa_addr)->sin_addr.s_addr == want.s_addr) {
-            name = i->ifa_name;
-            break;
-        }
-    ::freeifaddrs(list);
-    return name;
-}
-
 // The adapter's discovery: mDNS runs for the adapter's whole life (so the LDS-ME is already
 // known when the gripper powers up: no mDNS query and its 20-120 ms answer delay on the
 // way), and each power-up gets a Registrar, whose end unregisters (the LDS-ME sends the mDNS
@@ -111,18 +65,11 @@ class AdapterDiscovery {
             status_ = "LDS-ME and registration on each power-up";
             return;
         }
-        std::vector<std::string> interfaces = o.mdnsInterfaces;
-        bool multicast = true;
-        if (interfaces.empty() && !isWildcardHost(host)) {
-            if (isLoopbackHost(host)) {
-                multicast = false;
-                status_ = "listening on loopback only: no mDNS";
-            } else if (auto ifname = interfaceOfAddress(host); !ifname.empty()) {
-                interfaces = {ifname};
-            }
-        }
-        if (multicast && o.lds.empty()) {
-            mdns_ = std::make_unique<mdns::Mdns>(mdnsConfig(interfaces, o.mdnsPort, o.mdnsTtl));
+        const MdnsScope scope = mdnsScope(host, o.mdnsInterfaces);
+        if (!scope.multicast) status_ = kLoopbackNoMdns;
+        if (scope.multicast && o.lds.empty()) {
+            mdns_ =
+                std::make_unique<mdns::Mdns>(mdnsConfig(scope.interfaces, o.mdnsPort, o.mdnsTtl));
             mdns_->start();
             // Keeps the LDS-MEs' announcements cached between power-ups.
             browse_ = mdns_->browse("_opcua-tcp._tcp", [](const mdns::DiscoveredService&, bool) {});
@@ -172,6 +119,19 @@ class AdapterDiscovery {
     std::string status_;
 };
 
+// --calibration "OPEN,CLOSED": the 2F-85's gPO at its ends, 0 <= OPEN < CLOSED <= 255.
+device::robotiq::Calibration parseCalibration(const std::string& text) {
+    int open = -1;
+    int closed = -1;
+    char rest = 0;
+    if (std::sscanf(text.c_str(), "%d,%d%c", &open, &closed, &rest) != 2 || open < 0 ||
+        closed > 255 || open >= closed)
+        throw UsageError(
+            "--calibration expects OPEN,CLOSED with 0 <= OPEN < CLOSED <= 255, got \"" + text +
+            "\"");
+    return {.open = static_cast<std::uint8_t>(open), .closed = static_cast<std::uint8_t>(closed)};
+}
+
 std::string kindName(gripper::GripKind k) {
     return k == gripper::GripKind::kParallel ? "Parallel" : "Vacuum";
 }
@@ -183,11 +143,7 @@ int runGripperAdapter(const std::string& command, gripper::GripperHardware& hard
                       const sigset_t& stopSignals) {
     std::string& name = o.serve.discovery.name;
     if (name.empty()) name = defaultName;
-    ua::server::ServerConfig config;
-    config.host = o.serve.host;
-    config.port = o.serve.port;
-    config.applicationName = name;
-    applyDiscoveryConfig(config, o.serve.discovery, false);
+    ua::server::ServerConfig config = serverConfig(o.serve);
     if (config.publicHost.empty()) {
         char buf[256] = {};
         config.publicHost = ::gethostname(buf, sizeof buf - 1) == 0 ? buf : "localhost";
@@ -264,10 +220,7 @@ int runGripperAdapter(const std::string& command, gripper::GripperHardware& hard
               << o.pollMs << " ms, gone after " << o.graceMs << " ms); " << discovery->status()
               << "; stop with Ctrl-C or SIGTERM" << std::endl;
 
-    int sig = 0;
-    while (sigwait(&stopSignals, &sig) != 0) {
-    }
-    std::cerr << tag << (sig == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping" << std::endl;
+    waitForStopSignal(stopSignals, "pnp device " + command);
     adapter->stop();  // unregisters, halts running skills, stops the server
     adapter.reset();
     discovery.reset();
@@ -277,9 +230,6 @@ int runGripperAdapter(const std::string& command, gripper::GripperHardware& hard
 // The options every gripper adapter shares. `uaPort`: the OPC UA port's option names.
 void addAdapterOptions(CLI::App* cmd, GripperAdapterOptions& o, const std::string& uaPort,
                        const std::string& defaultName, const std::string& offsetDefault) {
-    cmd->add_option(uaPort, o.serve.port, "OPC UA TCP port (0: a free port, kept across power-ups)")
-        ->capture_default_str();
-    cmd->add_option("--host", o.serve.host, "address to listen on")->capture_default_str();
     cmd->add_option("--offset", o.offset,
                     "flange -> grip point x,y,z,a,b,c (m; rad about the fixed X, Y, Z axes); "
                     "default " +
@@ -301,7 +251,8 @@ void addAdapterOptions(CLI::App* cmd, GripperAdapterOptions& o, const std::strin
         ->check(CLI::Range(1, 600000));
     cmd->add_flag("--no-activate", o.noActivate,
                   "do not activate / home at power-up (the first skill does)");
-    addDiscoveryOptions(cmd, o.serve.discovery, false);
+    addServerOptions(cmd, o.serve, uaPort,
+                     "OPC UA TCP port (0: a free port, kept across power-ups)");
     cmd->get_option("--name")->description(
         "the device's name: DeviceSet/<NAME>; also the ApplicationName and mDNS instance "
         "(default " +
@@ -320,6 +271,7 @@ std::function<int()> addGripperDeviceCommands(CLI::App* device) {
     auto o = options(4851);
     auto serial = std::make_shared<std::string>();
     auto slave = std::make_shared<int>(9);
+    auto calibration = std::make_shared<std::string>();
     CLI::App* robotiq = device->add_subcommand(
         "robotiq",
         "a Robotiq 2F-85 (Modbus RTU) as a gripper device: Grasp, Release, MoveGripper, a "
@@ -332,6 +284,9 @@ std::function<int()> addGripperDeviceCommands(CLI::App* device) {
     robotiq->add_option("--slave", *slave, "Modbus slave address")
         ->capture_default_str()
         ->check(CLI::Range(1, 247));
+    robotiq->add_option("--calibration", *calibration,
+                        "gPO fully open and with the fingers touching, OPEN,CLOSED (default "
+                        "13,230: src/device/robotiq/README.md)");
     addAdapterOptions(robotiq, *o, "--port,--ua-port", "Robotiq", "0,0,0.2028,0,0,0");
     robotiq->footer(
         "Prints one JSON line (endpointUrl, applicationUri, device, gripPoint, skills); the "
@@ -339,13 +294,14 @@ std::function<int()> addGripperDeviceCommands(CLI::App* device) {
         "Example: pnp device robotiq --serial /dev/ttyUSB0 --port 4851");
 
     std::vector<std::function<int()>> runners;
-    runners.push_back([o, serial, slave, robotiq]() -> int {
+    runners.push_back([o, serial, slave, calibration, robotiq]() -> int {
         if (!*robotiq) return -1;
         device::robotiq::RobotiqConfig rc;
         rc.serialPath = *serial;
         rc.slave = *slave;
-        if (!o->offset.empty()) rc.tipOffset = parseOffset(o->offset);
+        if (!o->offset.empty()) rc.tipOffset = parseFrame("--offset", o->offset);
         rc.serialNumber = o->serialNumber;
+        if (!calibration->empty()) rc.calibration = parseCalibration(*calibration);
         const sigset_t stopSignals = blockStopSignals();  // before any thread exists
         device::robotiq::RobotiqHardware hardware(rc);
         return runGripperAdapter("robotiq", hardware, "Robotiq", *o, stopSignals);
@@ -369,7 +325,7 @@ std::function<int()> addGripperDeviceCommands(CLI::App* device) {
         device::wsg::WsgHardwareConfig wc;
         wc.host = hp->first;
         wc.port = hp->second;
-        if (!o->offset.empty()) wc.gripPointOffset = parseOffset(o->offset);
+        if (!o->offset.empty()) wc.gripPointOffset = parseFrame("--offset", o->offset);
         const sigset_t stopSignals = blockStopSignals();  // before any thread exists
         device::wsg::WsgHardware hardware(wc);
         return runGripperAdapter("wsg", hardware, "WSG50", *o, stopSignals);
@@ -402,7 +358,7 @@ std::function<int()> addGripperDeviceCommands(CLI::App* device) {
         options.table = *table;
         options.masterMap = *masterMap;
         options.serialNumber = o->serialNumber;
-        if (!o->offset.empty()) options.offset = parseOffset(o->offset);
+        if (!o->offset.empty()) options.offset = parseFrame("--offset", o->offset);
         auto parsed = device::ecbpi::parseIoLinkAddress(*iolink, options);
         if (!parsed) throw UsageError("--iolink: " + parsed.error());
         const sigset_t stopSignals = blockStopSignals();  // before any thread exists

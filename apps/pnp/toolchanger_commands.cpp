@@ -15,6 +15,7 @@
 #include "commands.hpp"
 #include "component/toolchanger/tool_changer.hpp"
 #include "device/kelvin/kelvin_adc_device.hpp"
+#include "device_commands.hpp"
 #include "discovery_commands.hpp"
 #include "output.hpp"
 
@@ -31,13 +32,6 @@ struct KelvinAdcOptions {
     ServeOptions serve;
 };
 
-void waitForSignal(const sigset_t& stopSignals, const char* who) {
-    int sig = 0;
-    while (sigwait(&stopSignals, &sig) != 0) {
-    }
-    std::cerr << who << ": " << (sig == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping" << std::endl;
-}
-
 int runKelvinAdc(KelvinAdcOptions& o) {
     std::pair<std::string, std::uint16_t> address;
     try {
@@ -48,47 +42,24 @@ int runKelvinAdc(KelvinAdcOptions& o) {
     if (o.serve.discovery.name.empty()) o.serve.discovery.name = "Kelvin ADC";
     const sigset_t stopSignals = blockStopSignals();
 
-    ua::server::ServerConfig config;
-    config.host = o.serve.host;
-    config.port = o.serve.port;
-    applyDiscoveryConfig(config, o.serve.discovery, false);
-    ua::server::Server server(config);
-    std::unique_ptr<device::kelvin::KelvinAdcDevice> device;
-    try {
-        device::kelvin::KelvinAdcDeviceOptions dopt;
-        dopt.name = o.deviceName;
-        dopt.adcHost = address.first;
-        dopt.adcPort = address.second;
-        dopt.unitId = o.unitId;
-        dopt.pollPeriod = std::chrono::milliseconds(o.pollMs);
-        dopt.responseTimeout = std::chrono::milliseconds(o.timeoutMs);
-        device = std::make_unique<device::kelvin::KelvinAdcDevice>(server, dopt);
-        server.start();
-        device->start();
-    } catch (const std::exception& e) {
-        std::cerr << "error: " << e.what() << "\n";
-        device.reset();
-        return kExitUaError;
-    }
-    std::cout << "listening on " << server.endpointUrl() << std::endl;
-    std::unique_ptr<DiscoveryRuntime> discovery;
-    try {
-        discovery = std::make_unique<DiscoveryRuntime>(server, o.serve.discovery);
-    } catch (const std::exception& e) {
-        std::cerr << "error: discovery: " << e.what() << "\n";
-        device.reset();
-        server.stop();
-        return kExitUaError;
-    }
-    std::cerr << "pnp device kelvin-adc: DeviceSet/" << o.deviceName
-              << " (KelvinToolChangerType) reading Modbus TCP " << device->adcEndpoint()
-              << " every " << o.pollMs << " ms; " << discovery->status()
-              << "; stop with Ctrl-C or SIGTERM" << std::endl;
-    waitForSignal(stopSignals, "pnp device kelvin-adc");
-    discovery.reset();
-    device.reset();
-    server.stop();
-    return kExitOk;
+    return serveUntilStopped(
+        o.serve, stopSignals, "pnp device kelvin-adc",
+        [&](ua::server::Server& server) {
+            device::kelvin::KelvinAdcDeviceOptions dopt;
+            dopt.name = o.deviceName;
+            dopt.adcHost = address.first;
+            dopt.adcPort = address.second;
+            dopt.unitId = o.unitId;
+            dopt.pollPeriod = std::chrono::milliseconds(o.pollMs);
+            dopt.responseTimeout = std::chrono::milliseconds(o.timeoutMs);
+            return std::make_unique<device::kelvin::KelvinAdcDevice>(server, dopt);
+        },
+        [&](device::kelvin::KelvinAdcDevice& device, const std::string& discoveryStatus) {
+            std::cerr << "pnp device kelvin-adc: DeviceSet/" << o.deviceName
+                      << " (KelvinToolChangerType) reading Modbus TCP " << device.adcEndpoint()
+                      << " every " << o.pollMs << " ms; " << discoveryStatus
+                      << "; stop with Ctrl-C or SIGTERM" << std::endl;
+        });
 }
 
 struct ToolChangerCliOptions {
@@ -132,48 +103,27 @@ int runToolChanger(ToolChangerCliOptions& o) {
     topt.findTimeout = std::chrono::milliseconds(o.findTimeoutMs);
     topt.toolDetectTimeout = std::chrono::milliseconds(o.toolTimeoutMs);
 
-    ua::server::ServerConfig config;
-    config.host = o.serve.host;
-    config.port = o.serve.port;
-    applyDiscoveryConfig(config, o.serve.discovery, false);
-    ua::server::Server server(config);
-    std::unique_ptr<component::toolchanger::ToolChangerComponent> changer;
-    try {
-        changer = std::make_unique<component::toolchanger::ToolChangerComponent>(server, topt,
-                                                                                 mdns.get());
-        server.start();
-        changer->start();
-    } catch (const std::exception& e) {
-        std::cerr << "error: " << e.what() << "\n";
-        changer.reset();
-        return kExitUaError;
-    }
-    std::cout << "listening on " << server.endpointUrl() << std::endl;
-    std::unique_ptr<DiscoveryRuntime> discovery;
-    try {
-        discovery = std::make_unique<DiscoveryRuntime>(server, o.serve.discovery);
-    } catch (const std::exception& e) {
-        std::cerr << "error: discovery: " << e.what() << "\n";
-        changer.reset();
-        server.stop();
-        return kExitUaError;
-    }
-    std::cerr << "pnp component toolchanger: DeviceSet/" << o.componentName
-              << " with ChangeTool, AttachTool, DetachTool, DropTool; robot " << o.robot << ", ADC "
-              << o.adc << "; " << discovery->status() << "; stop with Ctrl-C or SIGTERM"
-              << std::endl;
-    if (o.readyTimeoutMs > 0) {
-        const std::string why = changer->waitReady(std::chrono::milliseconds(o.readyTimeoutMs));
-        std::cerr << "pnp component toolchanger: "
-                  << (why.empty() ? std::string("ready (robot and ADC found)")
-                                  : "not ready: " + why)
-                  << std::endl;
-    }
-    waitForSignal(stopSignals, "pnp component toolchanger");
-    discovery.reset();
-    changer.reset();  // halts a running change
-    server.stop();
-    return kExitOk;
+    return serveUntilStopped(
+        o.serve, stopSignals, "pnp component toolchanger",
+        [&](ua::server::Server& server) {
+            return std::make_unique<component::toolchanger::ToolChangerComponent>(server, topt,
+                                                                                  mdns.get());
+        },
+        [&](component::toolchanger::ToolChangerComponent& changer,
+            const std::string& discoveryStatus) {
+            std::cerr << "pnp component toolchanger: DeviceSet/" << o.componentName
+                      << " with ChangeTool, AttachTool, DetachTool, DropTool; robot " << o.robot
+                      << ", ADC " << o.adc << "; " << discoveryStatus
+                      << "; stop with Ctrl-C or SIGTERM" << std::endl;
+            if (o.readyTimeoutMs > 0) {
+                const std::string why =
+                    changer.waitReady(std::chrono::milliseconds(o.readyTimeoutMs));
+                std::cerr << "pnp component toolchanger: "
+                          << (why.empty() ? std::string("ready (robot and ADC found)")
+                                          : "not ready: " + why)
+                          << std::endl;
+            }
+        });
 }
 
 }  // namespace
@@ -199,10 +149,7 @@ std::function<int()> addKelvinAdcCommand(CLI::App& device) {
     cmd->add_option("--timeout", o->timeoutMs, "deadline of each Modbus call, ms")
         ->capture_default_str()
         ->check(CLI::Range(1, 10000));
-    cmd->add_option("--port", o->serve.port, "OPC UA TCP port (0: any free port)")
-        ->capture_default_str();
-    cmd->add_option("--host", o->serve.host, "address to listen on")->capture_default_str();
-    addDiscoveryOptions(cmd, o->serve.discovery, false);
+    addServerOptions(cmd, o->serve);
     cmd->footer(
         "Prints `listening on opc.tcp://HOST:PORT` once ready.\n"
         "Example: pnp device kelvin-adc --adc 127.0.0.1:1502 --port 4846");
@@ -214,7 +161,7 @@ std::function<int()> addKelvinAdcCommand(CLI::App& device) {
 
 std::function<int()> addComponentCommands(CLI::App& app) {
     auto o = std::make_shared<ToolChangerCliOptions>();
-    o->serve.port = 4850;
+    o->serve.port = 4855;  // 4850 is `pnp sim`'s ground truth
     CLI::App* component =
         app.add_subcommand("component", "run a software component: skills built on other skills");
     component->require_subcommand(1);
@@ -241,10 +188,7 @@ std::function<int()> addComponentCommands(CLI::App& app) {
     cmd->add_option("--wait-ready", o->readyTimeoutMs,
                     "at start, wait up to MS ms for the robot and the ADC and say so (0: no)")
         ->capture_default_str();
-    cmd->add_option("--port", o->serve.port, "OPC UA TCP port (0: any free port)")
-        ->capture_default_str();
-    cmd->add_option("--host", o->serve.host, "address to listen on")->capture_default_str();
-    addDiscoveryOptions(cmd, o->serve.discovery, false);
+    addServerOptions(cmd, o->serve);
     cmd->get_option("--lds")->description(
         "register with this LDS-ME, and find the robot, the ADC and the tools there too");
     cmd->footer(

@@ -53,6 +53,7 @@ World::World(CellDescription cell, WorldConfig config) : cell_(std::move(cell)),
         objects_.push_back({o.name, o.pose, o.on.value_or("")});
     }
     heldOffsets_.assign(tools_.size(), Eigen::Isometry3d::Identity());
+    for (const ToolDescription& t : cell_.tools) fingerOpenings_.push_back(t.stroke);
     // A tool on a flange at start is locked there.
     for (RobotState& r : robots_)
         if (r.tool) r.changer = ChangerLock::kLocked;
@@ -123,7 +124,17 @@ void World::update(std::size_t robot) {
     if (s.tool) {
         if (const ToolDescription* tool = cell_.findTool(*s.tool)) s.tcp = s.flange * tool->tcp;
     }
-    s.tcpForce = contactForceAt(s.tcp.translation());
+    s.tcpForce = Eigen::Vector3d::Zero();
+    const ToolDescription* tool = s.tool ? cell_.findTool(*s.tool) : nullptr;
+    if (tool != nullptr && tool->kind == ToolKind::kParallelGripper) {
+        // The finger tips touch things; the point between them is where objects are held.
+        const std::size_t i = static_cast<std::size_t>(tool - cell_.tools.data());
+        const double half = 0.5 * fingerOpenings_[i];
+        s.tcpForce = contactForceAt(s.tcp * Eigen::Vector3d(half, 0.0, 0.0)) +
+                     contactForceAt(s.tcp * Eigen::Vector3d(-half, 0.0, 0.0));
+    } else {
+        s.tcpForce = contactForceAt(s.tcp.translation());
+    }
 }
 
 Snapshot World::snapshot() const { return Snapshot{time_, steps_, robots_, objects_, tools_}; }
@@ -297,6 +308,11 @@ void World::release(std::size_t tool) {
     if (!object) return;
     objects_[*object].holder.clear();
     settle(*object);
+}
+
+void World::setFingerOpening(std::size_t tool, double opening) {
+    if (!std::isfinite(opening)) return;
+    fingerOpenings_.at(tool) = std::clamp(opening, 0.0, cell_.tools.at(tool).stroke);
 }
 
 std::optional<std::size_t> World::held(std::size_t tool) const {

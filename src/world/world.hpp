@@ -134,6 +134,11 @@ class World {
     // table or a resting object under its centre) or falls to the floor.
     void release(std::size_t tool);
     std::optional<std::size_t> held(std::size_t tool) const;
+    // A parallel gripper's opening (m), told by its device simulator as the fingers move:
+    // the contact force of a robot with that tool acts on its two finger tips, not on the
+    // point between them (where an object sits while the fingers close around it).
+    // Default: the stroke (fully open).
+    void setFingerOpening(std::size_t tool, double opening);
 
     // --- Operator actions (a person in the cell). Each returns an error message, or "".
     // Put a tool (from the shelf or another dock) into an empty dock.
@@ -177,6 +182,7 @@ class World {
     bool resting(std::size_t object) const;  // in the cell and not held by a tool
 
     std::vector<Eigen::Isometry3d> heldOffsets_;  // per tool: grip point -> held object
+    std::vector<double> fingerOpenings_;          // per tool (parallel grippers), m
 
     CellDescription cell_;
     WorldConfig config_;

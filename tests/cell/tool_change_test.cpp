@@ -40,6 +40,10 @@ int run(const std::string& command, std::string& out) {
 }
 
 const std::string kPnp = PNP_BINARY;
+
+struct Eigen3d {
+    double x = 0, y = 0, z = 0;
+};
 // The docks of the thesis cell (models/cells/thesis.yaml) as ThreeDFrames x,y,z,a,b,c.
 const std::string kDock1 = "-0.125,0.513,-0.036,0,3.14159265358979,0";  // vacuum gripper
 const std::string kDock2 = "0.125,0.513,-0.036,0,3.14159265358979,0";   // parallel gripper
@@ -140,6 +144,26 @@ class ToolChange : public ::testing::Test {
         return out;
     }
 
+    // The value of a ground truth variable.
+    nlohmann::json value(const std::string& node) {
+        const std::string r = read(node);
+        const auto at = r.find('{');
+        if (at == std::string::npos) return {};
+        return nlohmann::json::parse(r.substr(at)).at("results").at(0).at("value");
+    }
+
+    Eigen3d cubeCentre() {
+        const auto v = value("Objects.cube-green.Pose").at("Body").at("CartesianCoordinates");
+        return {v.at("X").get<double>(), v.at("Y").get<double>(), v.at("Z").get<double>()};
+    }
+
+    // A move skill of the robot to a TCP pose x,y,z,a,b,c (world frame, the tool's TCP).
+    int move(const std::string& skill, const std::string& target, std::string& out) {
+        return run("timeout -k 5 60 " + kPnp + " skill run " + robot + " --skill " + skill +
+                       " --timeout 30000 TargetPosition=" + target + " 2>&1",
+                   out);
+    }
+
     std::string diagnostics() {
         return "\nsim:\n" + sim_.logTail() + "\nur:\n" + ur_.logTail() + "\nchanger:\n" +
                changer_.logTail() + "\nrobotiq:\n" + robotiq_.logTail() + "\necbpi:\n" +
@@ -185,7 +209,50 @@ TEST_F(ToolChange, ChangeToolLocksTheRightToolAndItsSkillsComeAndGo) {
             out);
     EXPECT_EQ(rc, 3) << out;
     EXPECT_NE(out.find("no object"), std::string::npos) << out;
-    EXPECT_NE(read("Tools.parallel-gripper.Held").find("\"\""), std::string::npos);
+    EXPECT_EQ(value("Tools.parallel-gripper.Held"), "");
+    // The fingers closed on nothing: open them, or they would hit the cube's top face.
+    out.clear();
+    ASSERT_EQ(
+        run("timeout -k 5 60 " + kPnp + " skill run ReleaseGripperSkillType --no-mdns --lds " +
+                lds + " --timeout 20000 2>&1",
+            out),
+        0)
+        << out;
+
+    // Around the cube it holds: the tool changer set the gripper's grip point as the robot's
+    // tool frame, so the TCP goes to the cube's centre (the flange pointing down).
+    // Up out of the docks first: below them the tool hangs beside the table, and a path
+    // through the table would end in a protective stop (the world's contact force).
+    const std::string down = ",0,3.14159265358979,0";  // as the tool hung in its dock
+    out.clear();
+    ASSERT_EQ(move("CartesianLinearMove", "0.125,0.513,0.15" + down, out), 0) << out;
+    ASSERT_EQ(move("CartesianPtpMove", "0.05,0.10,0.10" + down, out), 0) << out << diagnostics();
+    ASSERT_EQ(move("CartesianLinearMove", "0.05,0.10,0.02" + down, out), 0) << out;
+    out.clear();
+    ASSERT_EQ(run("timeout -k 5 60 " + kPnp + " skill run GraspGripperSkillType --no-mdns --lds " +
+                      lds + " --timeout 20000 2>&1",
+                  out),
+              0)
+        << out << diagnostics();
+    EXPECT_EQ(value("Tools.parallel-gripper.Held"), "cube-green");
+    // Carried to the thesis's place position and set down: it ends where the world says.
+    ASSERT_EQ(move("CartesianLinearMove", "0.05,0.10,0.10" + down, out), 0) << out;
+    EXPECT_NEAR(cubeCentre().z, 0.10, 1e-3);
+    ASSERT_EQ(move("CartesianPtpMove", "-0.05,-0.10,0.10" + down, out), 0) << out;
+    ASSERT_EQ(move("CartesianLinearMove", "-0.05,-0.10,0.025" + down, out), 0) << out;
+    out.clear();
+    ASSERT_EQ(
+        run("timeout -k 5 60 " + kPnp + " skill run ReleaseGripperSkillType --no-mdns --lds " +
+                lds + " --timeout 20000 2>&1",
+            out),
+        0)
+        << out;
+    EXPECT_EQ(value("Tools.parallel-gripper.Held"), "");
+    EXPECT_EQ(value("Objects.cube-green.Holder"), "table");
+    const Eigen3d c = cubeCentre();
+    EXPECT_NEAR(c.x, -0.05, 1e-3);
+    EXPECT_NEAR(c.y, -0.10, 1e-3);
+    EXPECT_NEAR(c.z, 0.02, 1e-9);
 }
 
 TEST_F(ToolChange, HaltMidChangeStopsTheRobotAndTheNextChangeWorks) {
@@ -200,7 +267,12 @@ TEST_F(ToolChange, HaltMidChangeStopsTheRobotAndTheNextChangeWorks) {
     };
     const auto a = joints();
     std::this_thread::sleep_for(300ms);
-    EXPECT_EQ(joints(), a);
+    const auto b = joints();
+    ASSERT_EQ(a.size(), 6u);
+    ASSERT_EQ(b.size(), 6u);
+    // At rest: no joint moved more than 1e-5 rad (5 µm at the TCP) in 0.3 s.
+    for (std::size_t j = 0; j < 6; ++j)
+        EXPECT_NEAR(a[j].get<double>(), b[j].get<double>(), 1e-5) << "joint " << j;
     EXPECT_NE(read("Robots.ur5.Changer").find("Open"), std::string::npos);
     // Nothing was locked; the next change (after the reset the run does) completes.
     out.clear();

@@ -11,19 +11,12 @@
 //
 // usage: node tests/device/node_robot_client.js opc.tcp://127.0.0.1:4841 x,y,z,a,b,c
 
-const { out, urlArg, noneClient, expect, checks } = require("../interop/common");
 const {
-    AttributeIds,
-    BrowseDirection,
-    DataType,
-    TimestampsToReturn,
-    ClientSubscription,
-    ClientMonitoredItem,
-    EventFilter,
-    SimpleAttributeOperand,
-    Variant,
-    coerceNodeId,
-} = require("node-opcua");
+    out, urlArg, noneClient, expect, checks, DI_URI, SKILLS_URI, READY, RUNNING,
+    RESULT_COMPLETED, expectGood, browseChildren, resolvePath, readValue, namespaceIndexes,
+    deviceSet, watchSkillStates,
+} = require("../interop/common");
+const { AttributeIds, DataType, Variant, coerceNodeId } = require("node-opcua");
 const { ThreeDFrame } = require("node-opcua-types");
 
 const url = urlArg("node_robot_client.js");
@@ -38,56 +31,8 @@ const { check, finish, unexpected, abort } = checks({
     stepTimeoutMs: 15000,
 });
 
-const DI_URI = "http://opcfoundation.org/UA/DI/";
 const ROB_URI = "http://opcfoundation.org/UA/Robotics/";
-const SKILLS_URI = "urn:pnp:ua:skills";
 const SKR_URI = "urn:pnp:ua:skills:robotics";
-const HIERARCHICAL = coerceNodeId("i=33");
-const PROGRAM_TRANSITION_EVENT_TYPE = coerceNodeId("i=2378");
-const READY = 12;
-const RUNNING = 13;
-const RESULT_COMPLETED = 1;
-
-const sc = (s) => (s ? s.toString() : String(s));
-const expectGood = (status, what) => expect(status && status.isGood(), `${what}: ${sc(status)}`);
-
-async function browseChildren(session, nodeId) {
-    const r = await session.browse({
-        nodeId,
-        browseDirection: BrowseDirection.Forward,
-        referenceTypeId: HIERARCHICAL,
-        includeSubtypes: true,
-        nodeClassMask: 0,
-        resultMask: 0x3f,
-    });
-    expectGood(r.statusCode, `Browse ${nodeId.toString()}`);
-    const refs = [...(r.references || [])];
-    let cp = r.continuationPoint;
-    for (let i = 0; cp && cp.length && i < 100; i++) {
-        const next = await session.browseNext(cp, false);
-        refs.push(...(next.references || []));
-        cp = next.continuationPoint;
-    }
-    return refs;
-}
-
-async function resolvePath(session, start, path) {
-    const r = await session.translateBrowsePath({
-        startingNode: start,
-        relativePath: {
-            elements: path.map(([ns, name]) => ({
-                referenceTypeId: HIERARCHICAL,
-                isInverse: false,
-                includeSubtypes: true,
-                targetName: { namespaceIndex: ns, name },
-            })),
-        },
-    });
-    const text = path.map(([ns, name]) => `${ns}:${name}`).join("/");
-    expect(r.statusCode.isGood() && r.targets && r.targets.length > 0,
-        `TranslateBrowsePath ${start.toString()} ${text}: ${sc(r.statusCode)}`);
-    return coerceNodeId(r.targets[0].targetId.toString());
-}
 
 const byType = (refs, type) => refs.filter((r) => r.typeDefinition.toString() === type);
 
@@ -101,22 +46,13 @@ async function main() {
         if (s) await s.close().catch(() => {});
         await client.disconnect().catch(() => {});
     };
-    const readValue = async (nodeId, what) => {
-        const dv = await s.read({ nodeId, attributeId: AttributeIds.Value });
-        expectGood(dv.statusCode, `read ${what}`);
-        return dv.value.value;
-    };
 
     const ns = {};
     const up = await check("connect; NamespaceArray has DI, Robotics, the skill models", async () => {
         await client.connect(url);
         s = await client.createSession();
-        const arr = await readValue(coerceNodeId("i=2255"), "NamespaceArray");
-        for (const [k, uri] of [["di", DI_URI], ["rob", ROB_URI], ["skills", SKILLS_URI],
-            ["skr", SKR_URI]]) {
-            ns[k] = arr.indexOf(uri);
-            expect(ns[k] > 0, `"${uri}" not in [${arr.join(", ")}]`);
-        }
+        Object.assign(ns, await namespaceIndexes(s,
+            { di: DI_URI, rob: ROB_URI, skills: SKILLS_URI, skr: SKR_URI }));
     });
     if (!up) {
         await cleanup();
@@ -126,11 +62,8 @@ async function main() {
     const n = { axes: [] };
     const found = await check("browse DeviceSet -> MotionDeviceSystem -> MotionDevices -> device " +
         "-> Axes (6 AxisType) and Skills -> CartesianLinearMove", async () => {
-        const objects = await browseChildren(s, coerceNodeId("i=85"));
-        const deviceSet = objects.find((r) =>
-            r.browseName.namespaceIndex === ns.di && r.browseName.name === "DeviceSet");
-        expect(deviceSet, "no DI DeviceSet below Objects");
-        const systems = byType(await browseChildren(s, deviceSet.nodeId), `ns=${ns.rob};i=1002`);
+        const systems = byType(await browseChildren(s, await deviceSet(s, ns.di)),
+            `ns=${ns.rob};i=1002`);
         expect(systems.length === 1, `${systems.length} MotionDeviceSystemType instances`);
         const motionDevices = await resolvePath(s, systems[0].nodeId, [[ns.rob, "MotionDevices"]]);
         const devices = byType(await browseChildren(s, motionDevices), `ns=${ns.skr};i=1012`);
@@ -168,7 +101,7 @@ async function main() {
     let before = null;
     await check("Axes: ActualPosition (Double) and EngineeringUnits rad", async () => {
         before = await readAxes();
-        const eu = await readValue(await resolvePath(s, n.axes[0], [[0, "EngineeringUnits"]]),
+        const eu = await readValue(s, await resolvePath(s, n.axes[0], [[0, "EngineeringUnits"]]),
             "EngineeringUnits");
         expect(eu && eu.displayName && eu.displayName.text === "rad",
             `EngineeringUnits ${eu && eu.displayName && eu.displayName.text}`);
@@ -176,42 +109,7 @@ async function main() {
 
     await check("CartesianLinearMove: Write TargetPosition, Start -> Running, Ready; Completed",
         async () => {
-            const subscription = ClientSubscription.create(s, {
-                requestedPublishingInterval: 50,
-                requestedLifetimeCount: 600,
-                requestedMaxKeepAliveCount: 20,
-                maxNotificationsPerPublish: 100,
-                publishingEnabled: true,
-                priority: 1,
-            });
-            await new Promise((resolve, reject) => {
-                subscription.on("started", resolve);
-                subscription.on("internal_error", reject);
-            });
-            const filter = new EventFilter({
-                selectClauses: [["Transition", "Number"], ["ToState", "Number"]].map((p) =>
-                    new SimpleAttributeOperand({
-                        typeDefinitionId: PROGRAM_TRANSITION_EVENT_TYPE,
-                        browsePath: p.map((name) => ({ namespaceIndex: 0, name })),
-                        attributeId: AttributeIds.Value,
-                    })),
-            });
-            const item = ClientMonitoredItem.create(subscription,
-                { nodeId: n.skill, attributeId: AttributeIds.EventNotifier },
-                { samplingInterval: 0, queueSize: 100, discardOldest: false, filter },
-                TimestampsToReturn.Both);
-            const states = [];
-            let ended = null;
-            const done = new Promise((resolve) => (ended = resolve));
-            item.on("changed", (fields) => {
-                const to = fields[1] ? fields[1].value : null;
-                states.push(to);
-                if (to !== RUNNING) ended();
-            });
-            await new Promise((resolve, reject) => {
-                item.on("initialized", resolve);
-                item.on("err", (e) => reject(new Error(`CreateMonitoredItems: ${e}`)));
-            });
+            const watch = await watchSkillStates(s, n.skill);
             const [x, y, z, a, b, c] = target;
             const frame = new ThreeDFrame({
                 cartesianCoordinates: { x, y, z },
@@ -225,12 +123,13 @@ async function main() {
             expectGood(w, "write TargetPosition");
             const st = await s.call({ objectId: n.skill, methodId: n.start, inputArguments: [] });
             expectGood(st.statusCode, "call Start");
-            await done;
-            await subscription.terminate().catch(() => {});
+            await watch.ended;
+            await watch.terminate();
+            const states = watch.states;
             expect(states[0] === RUNNING && states[states.length - 1] === READY,
                 `states ${JSON.stringify(states)}, expected Running then Ready`);
-            const result = await readValue(n.result, "FinalResultData/Result");
-            const message = await readValue(n.message, "FinalResultData/Message");
+            const result = await readValue(s, n.result, "FinalResultData/Result");
+            const message = await readValue(s, n.message, "FinalResultData/Message");
             expect(result === RESULT_COMPLETED, `Result ${result} (${message})`);
         });
 

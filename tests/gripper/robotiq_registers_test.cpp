@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <stdexcept>
+
 #include "device/robotiq/robotiq_hardware.hpp"
 
 using namespace pnp::device::robotiq;
@@ -43,7 +45,8 @@ TEST(RobotiqRegisters, StatusDecodesAsInTheManualsFrames) {
     const auto s = toStatus(grasped);
     EXPECT_TRUE(s.holding);
     EXPECT_FALSE(s.moving);
-    EXPECT_NEAR(s.width, 0.085 * (255 - 0xBD) / 255.0, 1e-12);
+    // gPO 0xBD between 0x0D (85 mm) and 0xE6 (touching): 20.0 mm.
+    EXPECT_NEAR(s.width, 0.085 * (0xE6 - 0xBD) / (0xE6 - 0x0D), 1e-12);
 
     // "09 04 06 F9 00 00 00 0D 00 ...": opened, at the requested position.
     const GripperStatus opened = decode({0xF900, 0x0000, 0x0D00});
@@ -51,6 +54,7 @@ TEST(RobotiqRegisters, StatusDecodesAsInTheManualsFrames) {
     EXPECT_EQ(opened.echo, 0x00);
     EXPECT_EQ(opened.position, 0x0D);
     EXPECT_FALSE(toStatus(opened).holding);
+    EXPECT_DOUBLE_EQ(toStatus(opened).width, 0.085);  // the manual's "fully open" reading
 
     // "09 04 06 31 00 00 00 00 00 ...": activation completed, fingers idle (gSTA 3, gACT 1).
     const GripperStatus activated = decode({0x3100, 0x0000, 0x0000});
@@ -61,14 +65,25 @@ TEST(RobotiqRegisters, StatusDecodesAsInTheManualsFrames) {
 }
 
 TEST(RobotiqRegisters, WidthSpeedAndForceMapLinearly) {
-    EXPECT_EQ(positionOf(0.085), 0);
-    EXPECT_EQ(positionOf(0.0), 255);
-    EXPECT_EQ(positionOf(0.0425), 128);  // 127.5 rounds up
-    EXPECT_EQ(positionOf(1.0), 0);       // clamped to the stroke
-    EXPECT_EQ(positionOf(-1.0), 255);
-    EXPECT_DOUBLE_EQ(widthOf(0), 0.085);
+    // The default calibration: 0x0D fully open, 0xE6 fingers touching.
+    EXPECT_EQ(positionOf(0.085), 0x0D);
+    EXPECT_EQ(positionOf(0.0), 0xE6);
+    EXPECT_EQ(positionOf(0.0425), 122);  // 13 + 217 / 2 = 121.5 rounds up
+    EXPECT_EQ(positionOf(1.0), 0x0D);    // clamped to the stroke
+    EXPECT_EQ(positionOf(-1.0), 0xE6);
+    EXPECT_DOUBLE_EQ(widthOf(0x0D), 0.085);
+    EXPECT_DOUBLE_EQ(widthOf(0xE6), 0.0);
+    EXPECT_NEAR(widthOf(122), 0.0425 - 0.085 / 217 / 2, 1e-12);
+    EXPECT_DOUBLE_EQ(widthOf(0), 0.085);  // beyond the ends (gPO 0 before the activation)
     EXPECT_DOUBLE_EQ(widthOf(255), 0.0);
-    for (int p = 0; p <= 255; ++p) EXPECT_EQ(positionOf(widthOf(static_cast<std::uint8_t>(p))), p);
+    for (int p = 0x0D; p <= 0xE6; ++p)
+        EXPECT_EQ(positionOf(widthOf(static_cast<std::uint8_t>(p))), p);
+    // Another unit's ends.
+    const Calibration other{.open = 3, .closed = 228};
+    EXPECT_EQ(positionOf(0.085, other), 3);
+    EXPECT_EQ(positionOf(0.0, other), 228);
+    EXPECT_DOUBLE_EQ(widthOf(3, other), 0.085);
+    EXPECT_NEAR(widthOf(0x0D, other), 0.085 * (228 - 0x0D) / 225.0, 1e-12);
     EXPECT_EQ(speedByteOf(kMinSpeed), 0);
     EXPECT_EQ(speedByteOf(kMaxSpeed), 255);
     EXPECT_EQ(speedByteOf(1.0), 255);
@@ -102,6 +117,15 @@ TEST(RobotiqHardware, ADeadSerialLineIsNoDevice) {
     EXPECT_DOUBLE_EQ(h.gripPoint().offset.translation().z(), 0.2028);
     EXPECT_DOUBLE_EQ(h.gripPoint().spanMax, 0.085);
     EXPECT_EQ(h.endpoint(), "modbus-rtu:///nonexistent/tty-for-pnp-tests?slave=9");
+}
+
+TEST(RobotiqHardware, AnInvertedCalibrationIsRefused) {
+    EXPECT_THROW(
+        RobotiqHardware({.serialPath = "/dev/null", .calibration = {.open = 230, .closed = 13}}),
+        std::invalid_argument);
+    EXPECT_THROW(
+        RobotiqHardware({.serialPath = "/dev/null", .calibration = {.open = 13, .closed = 13}}),
+        std::invalid_argument);
 }
 
 }  // namespace

@@ -47,8 +47,8 @@ world::CellDescription thesisCellFile() {
 }
 
 // The thesis cell with the 2F-85 locked on the UR5's flange (powered) from the start; with
-// `object`, the first object (made 16 mm across) between the finger tips.
-world::CellDescription robotiqOnTheFlange(bool object) {
+// `object`, the first object (made `across` wide) between the finger tips.
+world::CellDescription robotiqOnTheFlange(bool object, double across = 0.016) {
     world::CellDescription cell = thesisCellFile();
     for (auto& dock : cell.docks)
         if (dock.tool == "parallel-gripper") dock.tool.reset();
@@ -56,7 +56,7 @@ world::CellDescription robotiqOnTheFlange(bool object) {
     cell.robots[0].tool = "parallel-gripper";
     if (!object) return cell;
     world::ObjectDescription& cube = cell.objects[0];
-    cube.size = Eigen::Vector3d(0.016, 0.016, 0.04);
+    cube.size = Eigen::Vector3d(across, across, 0.04);
     const world::RobotDescription& r = cell.robots[0];
     const world::ToolDescription* t = cell.findTool("parallel-gripper");
     Eigen::Isometry3d flange = r.base * kinematics::forward(r.model, r.home);
@@ -89,7 +89,8 @@ struct SimulatedRobotiq {
     std::atomic<bool> stepping{true};
     std::thread stepper;
 
-    explicit SimulatedRobotiq(bool object) : world(robotiqOnTheFlange(object)) {
+    explicit SimulatedRobotiq(bool object, double across = 0.016)
+        : world(robotiqOnTheFlange(object, across)) {
         slave.start();
         stepper = std::thread([this] {
             auto next = std::chrono::steady_clock::now();
@@ -148,12 +149,37 @@ TEST(RobotiqOnTheSimulator, GraspsAnObjectTheWorldThenHolds) {
     auto g = h.grasp({.width = 0.0, .speed = 0.15, .force = 50.0}, in(5000ms), cancel);
     ASSERT_TRUE(g.ok()) << g.error().message;
     EXPECT_TRUE(g->holding);
-    EXPECT_GT(g->width, 0.0);  // stopped on the 16 mm object, short of closed
+    EXPECT_NEAR(g->width, 0.016, 0.0005);  // stopped on the 16 mm object (a count: 0.39 mm)
     auto r = h.release(in(5000ms), cancel);
     ASSERT_TRUE(r.ok()) << r.error().message;
     EXPECT_FALSE(r->holding);
     sim.pause();
     EXPECT_FALSE(sim.world.held(sim.tool));
+}
+
+// The adapter's widths are the world's: a grasp on the 40 mm cube reports 40 mm, a move
+// goes to the opening asked for.
+TEST(RobotiqOnTheSimulator, WidthsAreTheWorlds) {
+    SimulatedRobotiq sim(true, 0.04);
+    RobotiqHardware h(sim.config());
+    ASSERT_TRUE(h.connect(in(500ms)).ok());
+    std::atomic<bool> cancel{false};
+    ASSERT_TRUE(h.activate(in(5000ms), cancel).ok());
+    auto s = h.status(in(500ms));
+    ASSERT_TRUE(s.ok());
+    EXPECT_DOUBLE_EQ(s->width, 0.085);  // activated: fully open
+    auto g = h.grasp({.width = 0.0, .speed = 0.15, .force = 50.0}, in(5000ms), cancel);
+    ASSERT_TRUE(g.ok()) << g.error().message;
+    EXPECT_TRUE(g->holding);
+    EXPECT_NEAR(g->width, 0.04, 0.0005);
+    EXPECT_NEAR(sim.gripper.opening(), 0.04, 0.0005);
+    ASSERT_TRUE(h.release(in(5000ms), cancel).ok());
+    for (const double width : {0.06, 0.075}) {
+        auto m = h.move({.width = width, .speed = 0.15, .force = 50.0}, in(5000ms), cancel);
+        ASSERT_TRUE(m.ok()) << m.error().message;
+        EXPECT_NEAR(m->width, width, 0.0005);
+        EXPECT_NEAR(sim.gripper.opening(), width, 0.0005);
+    }
 }
 
 TEST(RobotiqOnTheSimulator, AGraspedObjectIsHeldByTheWorld) {

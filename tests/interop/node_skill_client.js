@@ -15,13 +15,16 @@
 //
 // usage: node tests/interop/node_skill_client.js opc.tcp://127.0.0.1:4840
 
-const { urlArg, noneClient, expect, checks } = require("./common");
+const {
+    urlArg, noneClient, expect, checks, DI_URI, SKILLS_URI, BASE_EVENT_TYPE,
+    PROGRAM_TRANSITION_EVENT_TYPE, HALTED, READY, RUNNING, RESULT_COMPLETED, RESULT_FAILED,
+    statusText: sc, expectGood, browseChildren, resolvePath, namespaceIndexes,
+    devicesWithInterface, startSubscription,
+} = require("./common");
 const {
     AttributeIds,
-    BrowseDirection,
     DataType,
     TimestampsToReturn,
-    ClientSubscription,
     ClientMonitoredItem,
     ContentFilter,
     ContentFilterElement,
@@ -41,77 +44,16 @@ const { check, finish, unexpected, abort } = checks({
     stepTimeoutMs: 8000,
 });
 
-const SKILLS_URI = "urn:pnp:ua:skills";
 const DEMO_URI = "urn:pnp:ua:skills:demo";
-const DI_URI = "http://opcfoundation.org/UA/DI/";
-
-const HIERARCHICAL = coerceNodeId("i=33");
-const HAS_INTERFACE = coerceNodeId("i=17603");
-const BASE_EVENT_TYPE = coerceNodeId("i=2041");
-const PROGRAM_TRANSITION_EVENT_TYPE = coerceNodeId("i=2378");
 
 // Part 10 ProgramStateMachineType transition numbers.
 const HALTED_TO_READY = 1;
 const READY_TO_RUNNING = 2;
 const RUNNING_TO_HALTED = 3;
 const RUNNING_TO_READY = 4;
-// Their StateNumber (ns0 ProgramStateMachineType: Halted 11, Ready 12, Running 13).
-const HALTED = 11;
-const READY = 12;
-const RUNNING = 13;
-const RESULT_COMPLETED = 1;
-const RESULT_FAILED = 2;
 
-const sc = (s) => (s ? s.toString() : String(s));
-function expectGood(status, what) {
-    expect(status && status.isGood(), `${what}: ${sc(status)}`);
-}
 function expectStatus(status, want, what) {
     expect(status && status.value === want.value, `${what}: ${sc(status)}, expected ${want.name}`);
-}
-
-// Forward hierarchical references of nodeId (all of them, following continuation points).
-async function browseChildren(session, nodeId, referenceTypeId = HIERARCHICAL) {
-    const r = await session.browse({
-        nodeId,
-        browseDirection: BrowseDirection.Forward,
-        referenceTypeId,
-        includeSubtypes: true,
-        nodeClassMask: 0,
-        resultMask: 0x3f,
-    });
-    expectGood(r.statusCode, `Browse ${nodeId.toString()}`);
-    const refs = [...(r.references || [])];
-    let cp = r.continuationPoint;
-    while (cp && cp.length) {
-        const next = await session.browseNext(cp, false);
-        refs.push(...(next.references || []));
-        cp = next.continuationPoint;
-    }
-    return refs;
-}
-
-// The node at `path` ([[nsIndex, name], ...], hierarchical references) below `start`, by
-// TranslateBrowsePathsToNodeIds; on failure the error lists the children of `start`.
-async function resolvePath(session, start, path) {
-    const r = await session.translateBrowsePath({
-        startingNode: start,
-        relativePath: {
-            elements: path.map(([ns, name]) => ({
-                referenceTypeId: HIERARCHICAL,
-                isInverse: false,
-                includeSubtypes: true,
-                targetName: { namespaceIndex: ns, name },
-            })),
-        },
-    });
-    const text = path.map(([ns, name]) => `${ns}:${name}`).join("/");
-    if (!r.statusCode.isGood() || !r.targets || r.targets.length === 0) {
-        const kids = await browseChildren(session, start).catch(() => []);
-        throw new Error(`TranslateBrowsePath ${text}: ${sc(r.statusCode)} (children of ` +
-            `${start.toString()}: ${kids.map((k) => k.browseName.toString()).join(", ")})`);
-    }
-    return coerceNodeId(r.targets[0].targetId.toString());
 }
 
 // An EventFilter selecting `paths` (typeDefinitionId, [names]) with OfType(eventType).
@@ -213,16 +155,7 @@ async function main() {
     const up = await check("connect, session A, NamespaceArray has skills, demo, DI", async () => {
         await clientA.connect(url);
         a = await clientA.createSession();
-        const dv = await a.read({ nodeId: "i=2255", attributeId: AttributeIds.Value });
-        expectGood(dv.statusCode, "read NamespaceArray");
-        const arr = dv.value.value || [];
-        ns = {
-            skills: arr.indexOf(SKILLS_URI),
-            demo: arr.indexOf(DEMO_URI),
-            di: arr.indexOf(DI_URI),
-        };
-        for (const [k, uri] of [["skills", SKILLS_URI], ["demo", DEMO_URI], ["di", DI_URI]])
-            expect(ns[k] > 0, `"${uri}" not in [${arr.join(", ")}]`);
+        ns = await namespaceIndexes(a, { skills: SKILLS_URI, demo: DEMO_URI, di: DI_URI });
     });
     if (!up) {
         await cleanup();
@@ -234,19 +167,9 @@ async function main() {
     let skill = null;
     const browsePath = "browse Objects -> DeviceSet -> skill controller -> Skills -> Delay";
     const found = await check(browsePath, async () => {
-        const objects = await browseChildren(a, coerceNodeId("i=85"));
-        const deviceSet = objects.find((r) =>
-            r.browseName.namespaceIndex === ns.di && r.browseName.name === "DeviceSet");
-        const names = objects.map((r) => r.browseName.toString());
-        expect(deviceSet, `no DI DeviceSet below Objects (${names.join(", ")})`);
         const iface = `ns=${ns.skills};i=1002`;
-        for (const d of await browseChildren(a, deviceSet.nodeId)) {
-            const ifs = await browseChildren(a, d.nodeId, HAS_INTERFACE);
-            if (ifs.some((r) => r.nodeId.toString() === iface)) {
-                device = d.nodeId;
-                break;
-            }
-        }
+        const controllers = await devicesWithInterface(a, ns.di, iface);
+        if (controllers.length) device = controllers[0].nodeId;
         expect(device, `no node below DeviceSet has a HasInterface reference to ${iface}`);
         const skills = await resolvePath(a, device, [[ns.skills, "Skills"]]);
         const delayType = `ns=${ns.demo};i=1001`;
@@ -301,18 +224,7 @@ async function main() {
     let queue = null;
     const subscribe = "event monitored item on the skill, OfType SkillTransitionEventType";
     const subscribed = await check(subscribe, async () => {
-        const subscription = ClientSubscription.create(a, {
-            requestedPublishingInterval: 50,
-            requestedLifetimeCount: 600,
-            requestedMaxKeepAliveCount: 20,
-            maxNotificationsPerPublish: 100,
-            publishingEnabled: true,
-            priority: 1,
-        });
-        await new Promise((resolve, reject) => {
-            subscription.on("started", resolve);
-            subscription.on("internal_error", reject);
-        });
+        const subscription = await startSubscription(a);
         const filter = eventFilter(SELECTS, coerceNodeId(`ns=${ns.skills};i=1003`));
         const item = ClientMonitoredItem.create(
             subscription,

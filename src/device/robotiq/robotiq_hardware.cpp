@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <stdexcept>
 #include <thread>
 
 namespace pnp::device::robotiq {
@@ -34,18 +35,23 @@ std::string millimetres(double m) {
 
 }  // namespace
 
-gripper::Status toStatus(const GripperStatus& s) {
+gripper::Status toStatus(const GripperStatus& s, const Calibration& calibration) {
     gripper::Status out;
     out.ready = s.ready();
     out.moving = s.goTo && s.object == ObjectDetection::kMoving;
     out.holding = s.object == ObjectDetection::kContactClosing ||
                   s.object == ObjectDetection::kContactOpening;
-    out.width = widthOf(s.position);
+    out.width = widthOf(s.position, calibration);
     out.fault = faultText(s.fault);
     return out;
 }
 
-RobotiqHardware::RobotiqHardware(RobotiqConfig config) : config_(std::move(config)) {}
+RobotiqHardware::RobotiqHardware(RobotiqConfig config) : config_(std::move(config)) {
+    if (config_.calibration.open >= config_.calibration.closed)
+        throw std::invalid_argument(
+            "Robotiq calibration: the open position (" + std::to_string(config_.calibration.open) +
+            ") must be below the closed one (" + std::to_string(config_.calibration.closed) + ")");
+}
 
 RobotiqHardware::~RobotiqHardware() { disconnect(); }
 
@@ -156,7 +162,7 @@ gripper::Result<Done> RobotiqHardware::writeRequest(const Request& request, Dead
 gripper::Result<gripper::Status> RobotiqHardware::status(Deadline deadline) {
     auto s = readStatus(deadline);
     if (!s) return s.error();
-    return toStatus(*s);
+    return toStatus(*s, config_.calibration);
 }
 
 gripper::Result<Done> RobotiqHardware::activate(Deadline deadline,
@@ -228,18 +234,20 @@ gripper::Result<gripper::Status> RobotiqHardware::grasp(const gripper::GraspRequ
         !std::isfinite(request.speed) || request.speed <= 0.0)
         return Error{ErrorKind::kRefused,
                      "grasp width must be within 0 .. 85 mm and the speed > 0"};
-    const Request r{
-        .activate = true,
-        .goTo = true,
-        .position = request.width <= 0.0 ? std::uint8_t{255} : positionOf(request.width),
-        .speed = speedByteOf(request.speed),
-        .force = forceByteOf(request.force)};
+    const Request r{.activate = true,
+                    .goTo = true,
+                    .position = request.width <= 0.0
+                                    ? std::uint8_t{255}
+                                    : positionOf(request.width, config_.calibration),
+                    .speed = speedByteOf(request.speed),
+                    .force = forceByteOf(request.force)};
     auto s = runTo(r, deadline, cancel);
     if (!s) return s.error();
     if (s->object == ObjectDetection::kAtPosition)
-        return Error{ErrorKind::kRefused, "no object between the fingers (closed to " +
-                                              millimetres(widthOf(s->position)) + ")"};
-    return toStatus(*s);
+        return Error{ErrorKind::kRefused,
+                     "no object between the fingers (closed to " +
+                         millimetres(widthOf(s->position, config_.calibration)) + ")"};
+    return toStatus(*s, config_.calibration);
 }
 
 gripper::Result<gripper::Status> RobotiqHardware::release(Deadline deadline,
@@ -252,9 +260,10 @@ gripper::Result<gripper::Status> RobotiqHardware::release(Deadline deadline,
     auto s = runTo(r, deadline, cancel);
     if (!s) return s.error();
     if (s->object == ObjectDetection::kContactOpening)
-        return Error{ErrorKind::kRefused, "something stopped the fingers while opening (at " +
-                                              millimetres(widthOf(s->position)) + ")"};
-    return toStatus(*s);
+        return Error{ErrorKind::kRefused,
+                     "something stopped the fingers while opening (at " +
+                         millimetres(widthOf(s->position, config_.calibration)) + ")"};
+    return toStatus(*s, config_.calibration);
 }
 
 gripper::Result<gripper::Status> RobotiqHardware::move(const gripper::MoveRequest& request,
@@ -270,16 +279,17 @@ gripper::Result<gripper::Status> RobotiqHardware::move(const gripper::MoveReques
         return Error{ErrorKind::kRefused, "the speed must be > 0"};
     const Request r{.activate = true,
                     .goTo = true,
-                    .position = positionOf(request.width),
+                    .position = positionOf(request.width, config_.calibration),
                     .speed = speedByteOf(request.speed),
                     .force = forceByteOf(request.force)};
     auto s = runTo(r, deadline, cancel);
     if (!s) return s.error();
     if (s->object != ObjectDetection::kAtPosition)
-        return Error{ErrorKind::kRefused, "an object stopped the fingers at " +
-                                              millimetres(widthOf(s->position)) +
-                                              " (asked: " + millimetres(request.width) + ")"};
-    return toStatus(*s);
+        return Error{ErrorKind::kRefused,
+                     "an object stopped the fingers at " +
+                         millimetres(widthOf(s->position, config_.calibration)) +
+                         " (asked: " + millimetres(request.width) + ")"};
+    return toStatus(*s, config_.calibration);
 }
 
 }  // namespace pnp::device::robotiq

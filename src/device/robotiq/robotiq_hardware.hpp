@@ -7,9 +7,9 @@
 // kNoDevice); while a motion runs the status is polled at the device's 200 Hz. Grasp closes
 // (rGTO, rPR 255, rSP / rFR from speed / force) and succeeds only when the fingers stopped on
 // an object (gOBJ 2); closing to the end (gOBJ 3) is kRefused "no object between the
-// fingers". Release opens fully; MoveGripper goes to a width (linear over the 85 mm stroke);
-// `cancel` stops the fingers (rGTO 0). Not thread-safe: one caller at a time
-// (gripper::HardwareAccess).
+// fingers". Release opens fully; MoveGripper goes to a width (linear over the 85 mm stroke
+// between the calibration's positions); `cancel` stops the fingers (rGTO 0). Not
+// thread-safe: one caller at a time (gripper::HardwareAccess).
 #pragma once
 
 #include <Eigen/Geometry>
@@ -35,6 +35,8 @@ struct RobotiqConfig {
     // Robotiq with its coupling).
     Eigen::Isometry3d tipOffset = Eigen::Isometry3d(Eigen::Translation3d(0.0, 0.0, 0.2028));
     std::string serialNumber = {};
+    // Width <-> position bytes (robotiq_registers.hpp); open must be below closed.
+    Calibration calibration = {};
     // One request/answer at most (the device answers within a few ms at 115200 baud).
     std::chrono::milliseconds transactionTimeout{100};
     // The status poll while a motion or activation runs: the device's 200 Hz.
@@ -89,6 +91,6 @@ class RobotiqHardware : public gripper::GripperHardware {
     Request last_;  // the request written last (stop keeps its position, speed, force)
 };
 
-gripper::Status toStatus(const GripperStatus& s);
+gripper::Status toStatus(const GripperStatus& s, const Calibration& calibration = {});
 
 }  // namespace pnp::device::robotiq

@@ -35,9 +35,15 @@ GripperStatus decode(const std::array<std::uint16_t, kRegisters>& reg) {
     return s;
 }
 
-std::uint8_t positionOf(double width) { return byteOf((kStroke - width) / kStroke); }
+std::uint8_t positionOf(double width, const Calibration& c) {
+    const double closed = std::clamp(1.0 - width / kStroke, 0.0, 1.0);  // 0 open .. 1 touching
+    return static_cast<std::uint8_t>(std::lround(c.open + closed * (c.closed - c.open)));
+}
 
-double widthOf(std::uint8_t position) { return kStroke * (255.0 - position) / 255.0; }
+double widthOf(std::uint8_t position, const Calibration& c) {
+    const double span = c.closed - c.open;
+    return std::clamp(kStroke * (c.closed - position) / span, 0.0, kStroke);
+}
 
 std::uint8_t speedByteOf(double speed) {
     return byteOf((speed - kMinSpeed) / (kMaxSpeed - kMinSpeed));

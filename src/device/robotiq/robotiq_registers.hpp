@@ -15,7 +15,7 @@ inline constexpr int kOutputAddress = 0x03E8;  // ACTION REQUEST ... FORCE
 inline constexpr int kInputAddress = 0x07D0;   // GRIPPER STATUS ... CURRENT
 inline constexpr int kRegisters = 3;
 
-// The 2F-85: 85 mm stroke; rPR / gPO 0 = fully open, 255 = closed (taken as linear).
+// The 2F-85: 85 mm stroke between the finger positions of a Calibration.
 inline constexpr double kStroke = 0.085;    // m
 inline constexpr double kMinSpeed = 0.020;  // m/s at rSP 0
 inline constexpr double kMaxSpeed = 0.150;  // m/s at rSP 255
@@ -56,9 +56,20 @@ struct GripperStatus {
 };
 GripperStatus decode(const std::array<std::uint16_t, kRegisters>& registers);
 
+// The position bytes (rPR / gPO) at the ends of the fingers' travel; the opening is linear
+// between them. The manual gives no mapping: after the activation a 2F-85 with its fingers
+// reads gPO 13 fully open (the manual's example frame "... 00 0D 00" after an opening) and
+// about 230 with the fingers touching (Robotiq's support: the nut cannot reach 255 with the
+// fingers mounted) — the values `pnp sim`'s gripper uses (docs/robotiq-2f85.md). Units
+// differ by a few counts: read gPO open and closed after the activation to calibrate one.
+struct Calibration {
+    std::uint8_t open = 0x0D;    // 85 mm
+    std::uint8_t closed = 0xE6;  // 0 mm
+};
+
 // Width (m, clamped to the stroke) <-> position byte.
-std::uint8_t positionOf(double width);
-double widthOf(std::uint8_t position);
+std::uint8_t positionOf(double width, const Calibration& calibration = {});
+double widthOf(std::uint8_t position, const Calibration& calibration = {});
 // Speed (m/s) and force (N) -> request bytes, clamped to the gripper's range.
 std::uint8_t speedByteOf(double speed);
 std::uint8_t forceByteOf(double force);

@@ -192,6 +192,11 @@ void Robotiq2f85::releaseIfWider() {
 void Robotiq2f85::step(double dt) {
     const bool powered = world_.toolPowered(tool_);
     std::lock_guard lock(mutex_);
+    // Whatever this step did, the world learns where the finger tips are (its contact).
+    struct TellOpening {
+        Robotiq2f85& g;
+        ~TellOpening() { g.world_.setFingerOpening(g.tool_, g.widthAt(g.position_)); }
+    } tell{*this};
     if (!powered) {
         if (powered_) {
             // Power gone: a power cycle for the registers; what the fingers held is let go.

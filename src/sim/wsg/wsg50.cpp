@@ -483,6 +483,7 @@ void Wsg50::step(double dt) {
         ++statistics_.lostPart;
     }
     if (motion_) advance(dt);
+    world_.setFingerOpening(tool_, width_ * 1e-3);  // its finger tips touch, not the gap
 }
 
 void Wsg50::powerChanged(bool powered) {
