@@ -128,8 +128,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             }
             if (robots.size() > 1) {
                 error = "several robots offer CartesianLinearMove (";
-                for (const auto& [uri, e] : robots)
-                    error += (error.back() == '(' ? "" : ", ") + e;
+                for (const auto& [uri, e] : robots) error += (error.back() == '(' ? "" : ", ") + e;
                 error += "): name one with --robot URL";
                 return nullptr;
             }
@@ -309,13 +308,23 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
     }
 
     // ---- attach --------------------------------------------------------------------------
+    // The docking poses of a dock: the changer's open angle in it, and both raised above.
+    struct DockPoses {
+        Isometry3d open, openAbove, lockedAbove;
+        std::string where;
+    };
+    DockPoses dockPoses(const Isometry3d& dock) const {
+        DockPoses p;
+        p.open = dock * Eigen::AngleAxisd(-options.lockAngle, Eigen::Vector3d::UnitZ());
+        p.openAbove = raised(p.open, options.liftHeight);
+        p.lockedAbove = raised(dock, options.liftHeight);
+        p.where = " at the dock " + formatPosition(dock);
+        return p;
+    }
+
     std::optional<Stop> attach(Run& r, const Isometry3d& dock, const std::string& appUri) {
         r.dock = dock;
-        const Isometry3d open =
-            dock * Eigen::AngleAxisd(-options.lockAngle, Eigen::Vector3d::UnitZ());
-        const Isometry3d openAbove = raised(open, options.liftHeight);
-        const Isometry3d lockedAbove = raised(dock, options.liftHeight);
-        const std::string where = " at the dock " + formatPosition(dock);
+        const auto [open, openAbove, lockedAbove, where] = dockPoses(dock);
 
         const AdcSample pre = currentState(r);
         if (r.halted) return Stop{skill::SkillResult::Aborted, "halted"};
@@ -494,11 +503,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
     // ---- detach --------------------------------------------------------------------------
     std::optional<Stop> detach(Run& r, const Isometry3d& dock) {
         r.dock = dock;
-        const Isometry3d open =
-            dock * Eigen::AngleAxisd(-options.lockAngle, Eigen::Vector3d::UnitZ());
-        const Isometry3d openAbove = raised(open, options.liftHeight);
-        const Isometry3d lockedAbove = raised(dock, options.liftHeight);
-        const std::string where = " at the dock " + formatPosition(dock);
+        const auto [open, openAbove, lockedAbove, where] = dockPoses(dock);
 
         const AdcSample pre = currentState(r);
         if (r.halted) return Stop{skill::SkillResult::Aborted, "halted"};
