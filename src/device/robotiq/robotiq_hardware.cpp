@@ -22,6 +22,16 @@ using gripper::ErrorKind;
 
 namespace {
 
+// A transaction without an answer, or with the answer to another request (a late answer to one
+// that timed out), is sent again while the caller's deadline leaves time, this many times in
+// all: one answer lost or late (a noisy line, a loaded host) is not a dead device and must not
+// end a motion whose fingers go on moving. Both transactions are idempotent (a status read; the
+// same request registers written again).
+constexpr int kAttempts = 3;
+
+// errno after a failed transaction: worth sending again (no answer, or not this one's).
+bool worthRetrying(int e) { return e == ETIMEDOUT || e == EMBBADDATA; }
+
 std::string newtons(double f) {
     char buf[32];
     std::snprintf(buf, sizeof buf, "%g N", f);
@@ -137,13 +147,18 @@ gripper::Result<GripperStatus> RobotiqHardware::readStatus(Deadline deadline) {
     if (ctx_ == nullptr) return Error{ErrorKind::kNoDevice, "not connected to " + endpoint()};
     if (!limitTransaction(deadline))
         return Error{ErrorKind::kTimeout, "the deadline passed before the status was read"};
+    // A late answer to a transaction that timed out (or to one of an earlier connection to
+    // this line) that has arrived since must not be taken for this one's.
+    modbus_flush(ctx_);
     std::uint16_t regs[kRegisters] = {};
-    if (modbus_read_input_registers(ctx_, kInputAddress, kRegisters, regs) != kRegisters) {
+    for (int attempt = 1;; ++attempt) {
+        if (modbus_read_input_registers(ctx_, kInputAddress, kRegisters, regs) == kRegisters)
+            return decode({regs[0], regs[1], regs[2]});
+        const bool again = worthRetrying(errno);
         Error e = noAnswer("reading the status");
         modbus_flush(ctx_);  // a late answer must not be taken for the next one
-        return e;
+        if (!again || attempt >= kAttempts || !limitTransaction(deadline)) return e;
     }
-    return decode({regs[0], regs[1], regs[2]});
 }
 
 gripper::Result<Done> RobotiqHardware::writeRequest(const Request& request, Deadline deadline) {
@@ -151,10 +166,14 @@ gripper::Result<Done> RobotiqHardware::writeRequest(const Request& request, Dead
     if (!limitTransaction(deadline))
         return Error{ErrorKind::kTimeout, "the deadline passed before the request was written"};
     const auto regs = encode(request);
-    if (modbus_write_registers(ctx_, kOutputAddress, kRegisters, regs.data()) != kRegisters) {
+    modbus_flush(ctx_);  // a late answer that has arrived since (readStatus)
+    for (int attempt = 1;; ++attempt) {
+        if (modbus_write_registers(ctx_, kOutputAddress, kRegisters, regs.data()) == kRegisters)
+            break;
+        const bool again = worthRetrying(errno);
         Error e = noAnswer("writing the request");
         modbus_flush(ctx_);
-        return e;
+        if (!again || attempt >= kAttempts || !limitTransaction(deadline)) return e;
     }
     last_ = request;
     return Done{};
