@@ -70,7 +70,9 @@ int main(int argc, char** argv) {
         "for discovery (docs/discovery.md), `pnp skills --help` and `pnp skill run --help` for "
         "skills (docs/skills.md), `pnp bench middleware --help` for the middleware evaluation "
         "(docs/middleware_bench.md), `pnp sim --help`, `pnp device ur --help` and `pnp robot "
-        "square --help` for the simulated robot cell (README, docs/ur-real-robot.md).");
+        "square --help` for the simulated robot cell (README, docs/ur-real-robot.md), `pnp "
+        "device robotiq|ecbpi|wsg|kelvin-adc --help` and `pnp component toolchanger --help` "
+        "for its tools (README \"Tools that plug in\").");
 
     std::uint16_t ldsPort = 4840;
     std::string ldsHost = "0.0.0.0";

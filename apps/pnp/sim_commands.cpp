@@ -174,8 +174,10 @@ std::function<int()> addSimCommands(CLI::App& app) {
     o->serve.port = 4850;
     CLI::App* cmd = app.add_subcommand(
         "sim",
-        "run the simulated cell: the physical world, every device's controller on its own "
-        "protocol (a UR controller over RTDE), the ground truth as an OPC UA server");
+        "run the simulated cell: the physical world, every device on its own protocol (UR over "
+        "RTDE, Robotiq over Modbus RTU, ECBPi over IO-Link/Modbus TCP, WSG 50 over TCP, the "
+        "tool changer's ADC), the ground truth as an OPC UA server; `tool` / `object`: the "
+        "operator's hands");
     cmd->add_option("--cell", o->cell,
                     "cell file (docs/cell-file.md; default: the thesis cell, "
                     "models/cells/thesis.yaml)");
