@@ -368,34 +368,16 @@ Result<gripper::Status> EcbpiHardware::grasp(const gripper::GraspRequest&, Deadl
         if (Result<Done> id = checkIdentityLocked(deadline); !id.ok()) return id.error();
         if (Result<Done> w = writeOutputsLocked(true, false, deadline); !w.ok()) return w.error();
     }
-    for (;;) {
-        if (cancel.load()) {
-            const std::lock_guard lock(mutex_);
+    return pollUntil(
+        deadline, giveUp, cancel, "grasp cancelled: suction switched off",
+        [&](Inputs& in) -> std::optional<Result<gripper::Status>> {
+            if (in.partPresent) return toStatus(in);
+            if (Clock::now() < giveUp) return std::nullopt;
             outputsOffLocked(true, true);
-            return Error{ErrorKind::kCancelled, "grasp cancelled: suction switched off"};
-        }
-        {
-            const std::lock_guard lock(mutex_);
-            Result<Inputs> in = readInputsLocked(deadline);
-            if (!in.ok()) {
-                outputsOffLocked(true, true);
-                return in.error();
-            }
-            if (in->port != PortState::kOperate) {
-                outputsOffLocked(true, true);  // the master would apply it on power-up
-                return noDevice(*in);
-            }
-            if (in->partPresent) return toStatus(*in);
-            if (Clock::now() >= giveUp) {
-                outputsOffLocked(true, true);
-                return Error{ErrorKind::kRefused,
-                             "no part present after " +
-                                 std::to_string(msBetween(start, Clock::now())) + " ms (vacuum " +
-                                 mbar(in->vacuum) + "): suction switched off"};
-            }
-        }
-        std::this_thread::sleep_until(std::min(giveUp, Clock::now() + options_.pollPeriod));
-    }
+            return Error{ErrorKind::kRefused,
+                         "no part present after " + std::to_string(msBetween(start, Clock::now())) +
+                             " ms (vacuum " + mbar(in.vacuum) + "): suction switched off"};
+        });
 }
 
 Result<gripper::Status> EcbpiHardware::release(Deadline deadline, const std::atomic<bool>& cancel) {
@@ -409,11 +391,36 @@ Result<gripper::Status> EcbpiHardware::release(Deadline deadline, const std::ato
         // Suction off and a blow-off pulse that lasts until the vacuum is gone.
         if (Result<Done> w = writeOutputsLocked(false, true, deadline); !w.ok()) return w.error();
     }
+    return pollUntil(
+        deadline, giveUp, cancel, "release cancelled: blow-off switched off",
+        [&](Inputs& in) -> std::optional<Result<gripper::Status>> {
+            if (!in.partPresent && in.vacuum < options_.releasedVacuum) {
+                if (Result<Done> w =
+                        writeOutputsLocked(false, false, Clock::now() + options_.requestTimeout);
+                    !w.ok()) {
+                    return w.error();
+                }
+                in.blowOff = false;
+                in.suction = false;
+                return toStatus(in);
+            }
+            if (Clock::now() < giveUp) return std::nullopt;
+            outputsOffLocked(true, true);
+            return Error{ErrorKind::kTimeout, "vacuum still " + mbar(in.vacuum) + " after " +
+                                                  std::to_string(msBetween(start, Clock::now())) +
+                                                  " ms of blow-off"};
+        });
+}
+
+Result<gripper::Status> EcbpiHardware::pollUntil(Deadline deadline, Deadline giveUp,
+                                                 const std::atomic<bool>& cancel,
+                                                 const std::string& cancelled,
+                                                 const PollStep& step) {
     for (;;) {
         if (cancel.load()) {
             const std::lock_guard lock(mutex_);
             outputsOffLocked(true, true);
-            return Error{ErrorKind::kCancelled, "release cancelled: blow-off switched off"};
+            return Error{ErrorKind::kCancelled, cancelled};
         }
         {
             const std::lock_guard lock(mutex_);
@@ -423,26 +430,10 @@ Result<gripper::Status> EcbpiHardware::release(Deadline deadline, const std::ato
                 return in.error();
             }
             if (in->port != PortState::kOperate) {
-                outputsOffLocked(true, true);
+                outputsOffLocked(true, true);  // the master would apply it on power-up
                 return noDevice(*in);
             }
-            if (!in->partPresent && in->vacuum < options_.releasedVacuum) {
-                if (Result<Done> w =
-                        writeOutputsLocked(false, false, Clock::now() + options_.requestTimeout);
-                    !w.ok()) {
-                    return w.error();
-                }
-                in->blowOff = false;
-                in->suction = false;
-                return toStatus(*in);
-            }
-            if (Clock::now() >= giveUp) {
-                outputsOffLocked(true, true);
-                return Error{ErrorKind::kTimeout,
-                             "vacuum still " + mbar(in->vacuum) + " after " +
-                                 std::to_string(msBetween(start, Clock::now())) +
-                                 " ms of blow-off"};
-            }
+            if (auto result = step(*in)) return std::move(*result);
         }
         std::this_thread::sleep_until(std::min(giveUp, Clock::now() + options_.pollPeriod));
     }

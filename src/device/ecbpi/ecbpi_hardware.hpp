@@ -12,8 +12,10 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -107,6 +109,13 @@ class EcbpiHardware : public gripper::GripperHardware {
     // Switches the outputs off (best effort, bounded by a short deadline of its own).
     void outputsOffLocked(bool suction, bool blowOff);
     Error noDevice(const Inputs& in) const;
+    // Reads the inputs every pollPeriod until `step` (called with mutex_ held, on the inputs
+    // of an operating port) returns the call's result. A cancel (`cancelled`: its message), a
+    // failed read or a port no longer operating switch both outputs off and end the call.
+    using PollStep = std::function<std::optional<Result<gripper::Status>>(Inputs& in)>;
+    Result<gripper::Status> pollUntil(Deadline deadline, Deadline giveUp,
+                                      const std::atomic<bool>& cancel, const std::string& cancelled,
+                                      const PollStep& step);
     gripper::Status toStatus(const Inputs& in) const;
 
     EcbpiOptions options_;
