@@ -1,0 +1,239 @@
+#include "kb/endpoint.hpp"
+
+#include <httplib.h>
+
+#include <charconv>
+#include <nlohmann/json.hpp>
+
+#include "kb/sparql.hpp"
+#include "kb/store.hpp"
+#include "kb/turtle.hpp"
+
+namespace pnp::kb {
+namespace {
+
+constexpr std::size_t kMaxErrorText = 500;
+constexpr std::string_view kXsdString = "http://www.w3.org/2001/XMLSchema#string";
+constexpr std::string_view kXsdBoolean = "http://www.w3.org/2001/XMLSchema#boolean";
+
+std::string truncated(std::string s) {
+    if (s.size() > kMaxErrorText) s = s.substr(0, kMaxErrorText) + "...";
+    while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
+    return s;
+}
+
+class EndpointKnowledgeBase final : public KnowledgeBase {
+  public:
+    EndpointKnowledgeBase(std::string url, std::string host, int port, std::string path)
+        : url_(std::move(url)), host_(std::move(host)), port_(port), path_(std::move(path)) {}
+
+    Results select(std::string_view query, Deadline deadline) override {
+        auto json = queryJson(query, deadline);
+        Results results;
+        try {
+            for (const auto& v : json.at("head").at("vars"))
+                results.variables.push_back(v.get<std::string>());
+            const auto& bindings = json.at("results").at("bindings");
+            if (bindings.size() > kMaxResultRows) {
+                throw KbError(url_ + ": more than " + std::to_string(kMaxResultRows) + " results");
+            }
+            results.rows.reserve(bindings.size());
+            for (const auto& b : bindings) {
+                std::vector<std::optional<Term>> row(results.variables.size());
+                for (std::size_t j = 0; j < results.variables.size(); ++j) {
+                    auto it = b.find(results.variables[j]);
+                    if (it != b.end()) row[j] = termOf(*it);
+                }
+                results.rows.push_back(std::move(row));
+            }
+        } catch (const nlohmann::json::exception& e) {
+            throw KbError(url_ + ": malformed SPARQL JSON results: " + e.what());
+        }
+        return results;
+    }
+
+    bool ask(std::string_view query, Deadline deadline) override {
+        auto json = queryJson(query, deadline);
+        auto it = json.find("boolean");
+        if (it != json.end() && it->is_boolean()) return it->get<bool>();
+        // Virtuoso 7 answers a POSTed ASK as a SELECT of one variable __ASK_RETVAL: one row
+        // (value 1) when true, no row when false.
+        try {
+            const auto& vars = json.at("head").at("vars");
+            if (vars.size() == 1 && vars[0] == "__ASK_RETVAL") {
+                const auto& bindings = json.at("results").at("bindings");
+                if (bindings.empty()) return false;
+                auto v = bindings[0].at("__ASK_RETVAL").at("value").get<std::string>();
+                return v != "0" && v != "false";
+            }
+        } catch (const nlohmann::json::exception&) {
+        }
+        throw KbError(url_ + ": the answer to an ASK query has no boolean");
+    }
+
+    void update(std::string_view update, Deadline deadline) override {
+        checkSize(update);
+        post("update", update, "*/*", deadline);
+    }
+
+    std::size_t loadTurtle(const std::filesystem::path& file, const std::string& graph,
+                           Deadline deadline) override {
+        iri(graph);
+        auto triples = parseTurtleFile(file, "b");
+        // Blank node labels hold only within one request: every triple with a blank node goes
+        // into the same (last) request, so the file's structure survives.
+        std::vector<const TermTriple*> plain, blank;
+        for (const auto& t : triples) {
+            bool hasBlank = t[0].kind == Term::Kind::Blank || t[2].kind == Term::Kind::Blank;
+            (hasBlank ? blank : plain).push_back(&t);
+        }
+        auto send = [&](const std::vector<const TermTriple*>& batch, bool withBlanks) {
+            // Virtuoso refuses blank nodes in INSERT DATA ("not allowed in a constant clause");
+            // an INSERT template with an empty WHERE makes them fresh nodes, as the spec says.
+            std::string text =
+                std::string(withBlanks ? "INSERT" : "INSERT DATA") + " { GRAPH <" + graph + "> {\n";
+            for (const auto* t : batch) {
+                text += toNTriples((*t)[0]) + " " + toNTriples((*t)[1]) + " " +
+                        toNTriples((*t)[2]) + " .\n";
+            }
+            text += withBlanks ? "} } WHERE { }" : "} }";
+            try {
+                post("update", text, "*/*", deadline);
+            } catch (const KbError& e) {
+                throw KbError(file.string() + ": loading into " + e.what());
+            }
+        };
+        for (std::size_t i = 0; i < plain.size(); i += kTriplesPerInsert) {
+            std::vector<const TermTriple*> batch(
+                plain.begin() + static_cast<std::ptrdiff_t>(i),
+                plain.begin() +
+                    static_cast<std::ptrdiff_t>(std::min(plain.size(), i + kTriplesPerInsert)));
+            send(batch, false);
+        }
+        if (!blank.empty()) send(blank, true);
+        return triples.size();
+    }
+
+    std::string describe() const override { return url_; }
+
+  private:
+    void checkSize(std::string_view text) const {
+        if (text.size() > kMaxQueryBytes) {
+            throw KbError("SPARQL text of " + std::to_string(text.size()) + " bytes, more than " +
+                          std::to_string(kMaxQueryBytes));
+        }
+    }
+
+    nlohmann::json queryJson(std::string_view query, Deadline deadline) {
+        checkSize(query);
+        std::string body = post("query", query, "application/sparql-results+json", deadline);
+        try {
+            return nlohmann::json::parse(body);
+        } catch (const nlohmann::json::exception& e) {
+            throw KbError(url_ + ": the answer is not SPARQL JSON results (" + e.what() +
+                          "): " + truncated(body));
+        }
+    }
+
+    Term termOf(const nlohmann::json& b) const {
+        std::string type = b.at("type").get<std::string>();
+        Term t;
+        t.value = b.at("value").get<std::string>();
+        if (type == "uri") {
+            t.kind = Term::Kind::Iri;
+        } else if (type == "bnode") {
+            t.kind = Term::Kind::Blank;
+        } else if (type == "literal" || type == "typed-literal") {
+            t.kind = Term::Kind::Literal;
+            if (auto it = b.find("datatype"); it != b.end()) t.datatype = it->get<std::string>();
+            if (auto it = b.find("xml:lang"); it != b.end()) t.lang = it->get<std::string>();
+            if (t.datatype == kXsdString || !t.lang.empty()) t.datatype.clear();
+            // Virtuoso writes booleans as 1 / 0.
+            if (t.datatype == kXsdBoolean && (t.value == "1" || t.value == "0")) {
+                t.value = t.value == "1" ? "true" : "false";
+            }
+        } else {
+            throw KbError(url_ + ": unknown term type '" + type + "' in the results");
+        }
+        return t;
+    }
+
+    // POSTs `field`=`text` (SPARQL 1.1 Protocol, form-encoded); returns the response body.
+    std::string post(const char* field, std::string_view text, const char* accept,
+                     Deadline deadline) {
+        auto remaining = std::chrono::duration_cast<std::chrono::microseconds>(
+            deadline - std::chrono::steady_clock::now());
+        if (remaining.count() <= 0) throw KbError(url_ + ": deadline exceeded");
+        httplib::Client client(host_, port_);
+        client.set_connection_timeout(remaining);
+        client.set_read_timeout(remaining);
+        client.set_write_timeout(remaining);
+        httplib::Request req;
+        req.method = "POST";
+        req.path = path_;
+        req.headers = {{"Accept", accept}};
+        req.set_header("Content-Type", "application/x-www-form-urlencoded");
+        req.body =
+            std::string(field) + "=" + httplib::detail::encode_query_param(std::string(text));
+        std::string body;
+        bool tooLarge = false;
+        req.content_receiver = [&](const char* data, std::size_t n, std::uint64_t, std::uint64_t) {
+            if (body.size() + n > kMaxEndpointResponseBytes) {
+                tooLarge = true;
+                return false;
+            }
+            body.append(data, n);
+            return true;
+        };
+        httplib::Response res;
+        httplib::Error error = httplib::Error::Success;
+        bool ok = client.send(req, res, error);
+        if (tooLarge) {
+            throw KbError(url_ + ": answer larger than " +
+                          std::to_string(kMaxEndpointResponseBytes) + " bytes");
+        }
+        if (!ok) {
+            std::string why = httplib::to_string(error);
+            if (error == httplib::Error::Read && std::chrono::steady_clock::now() >= deadline) {
+                why = "deadline exceeded";
+            }
+            throw KbError(url_ + ": " + why);
+        }
+        if (res.status < 200 || res.status >= 300) {
+            throw KbError(url_ + ": HTTP " + std::to_string(res.status) + ": " + truncated(body));
+        }
+        return body;
+    }
+
+    std::string url_, host_;
+    int port_;
+    std::string path_;
+};
+
+}  // namespace
+
+std::unique_ptr<KnowledgeBase> openEndpoint(const std::string& url) {
+    constexpr std::string_view scheme = "http://";
+    if (!url.starts_with(scheme)) throw KbError("'" + url + "': expected http://host:port/path");
+    std::string rest = url.substr(scheme.size());
+    auto slash = rest.find('/');
+    std::string authority = rest.substr(0, slash);
+    std::string path = slash == std::string::npos ? "/" : rest.substr(slash);
+    int port = 80;
+    std::string host = authority;
+    if (auto colon = authority.rfind(':'); colon != std::string::npos) {
+        host = authority.substr(0, colon);
+        std::string digits = authority.substr(colon + 1);
+        auto r = std::from_chars(digits.data(), digits.data() + digits.size(), port);
+        if (digits.empty() || r.ec != std::errc() || r.ptr != digits.data() + digits.size() ||
+            port <= 0 || port > 65535) {
+            throw KbError("'" + url + "': bad port '" + digits + "'");
+        }
+    }
+    if (host.empty() || host.find_first_of("@[] ") != std::string::npos) {
+        throw KbError("'" + url + "': bad host '" + host + "'");
+    }
+    return std::make_unique<EndpointKnowledgeBase>(url, host, port, path);
+}
+
+}  // namespace pnp::kb
