@@ -307,6 +307,7 @@ struct Cell {
     std::unique_ptr<FakeRobot> robot;
     std::unique_ptr<FakeAdc> adc;
     std::unique_ptr<FakeTool> vacuum, parallel;
+    std::unique_ptr<FakeTool> wsg;  // tool 3: on the shelf until an operator puts it in a dock
     std::unique_ptr<ua::server::Server> server;
     std::unique_ptr<tc::ToolChangerComponent> changer;
     std::shared_ptr<ua::client::Client> client;
@@ -319,6 +320,7 @@ struct Cell {
         adc = std::make_unique<FakeAdc>(model);
         vacuum = std::make_unique<FakeTool>("urn:pnp:test:vacuum", "Vacuum", 0.1868);
         parallel = std::make_unique<FakeTool>("urn:pnp:test:parallel", "Parallel", 0.2028);
+        wsg = std::make_unique<FakeTool>("urn:pnp:test:wsg", "Wsg", 0.1950);
         auto cfg = pnp::testing::loopbackConfig();
         cfg.applicationUri = "urn:pnp:test:toolchanger";
         server = std::make_unique<ua::server::Server>(cfg);
@@ -338,8 +340,10 @@ struct Cell {
         server->start();
         changer->start();
         // Power = plug in: a locked tool's server is "discovered", an unlocked one is gone.
+        // Tool 4 has no server (an adapter that never comes up).
         model.power = [this](int tool, bool on) {
-            const std::string url = (tool == 1 ? vacuum : parallel)->url();
+            if (tool < 1 || tool > 3) return;
+            const std::string url = (tool == 1 ? vacuum : tool == 2 ? parallel : wsg)->url();
             if (on)
                 changer->detector().addServer(url);
             else
@@ -378,6 +382,36 @@ struct Cell {
         return client->readValue(client->resolve(changer->node(), p));
     }
 };
+
+// FinalResultData/<name> of a run (empty Variant: not there).
+ua::Variant resultValue(const skill::client::RunResult& r, const std::string& name) {
+    for (const auto& [n, v] : r.finalResult.values)
+        if (n == name) return v;
+    return {};
+}
+std::string resultText(const skill::client::RunResult& r, const std::string& name) {
+    const ua::Variant v = resultValue(r, name);
+    const auto* s = v.scalar<ua::String>();
+    return s ? *s : "<no " + name + ">";
+}
+int resultId(const skill::client::RunResult& r) {
+    const ua::Variant v = resultValue(r, "ToolId");
+    const auto* i = v.scalar<ua::Int32>();
+    return i ? *i : -1;
+}
+std::optional<Isometry3d> resultDock(const skill::client::RunResult& r) {
+    const ua::Variant v = resultValue(r, "ToolPosition");
+    const auto* x = v.scalar<ua::ExtensionObject>();
+    if (x == nullptr) return std::nullopt;
+    auto f = ua::fromExtensionObject<ua::ThreeDFrame>(*x);
+    if (!f) return std::nullopt;
+    return ua::spatial::toIsometry(*f);
+}
+// Within 1e-6 m / rad (the frame goes through a ThreeDFrame's Euler angles).
+bool sameDock(const std::optional<Isometry3d>& a, const Isometry3d& b) {
+    return a && (a->translation() - b.translation()).norm() < 1e-6 &&
+           Eigen::AngleAxisd(a->linear().transpose() * b.linear()).angle() < 1e-6;
+}
 
 std::vector<std::string> phaseNames(const skill::client::RunResult& r) {
     for (const auto& [name, v] : r.finalResult.values)
@@ -527,4 +561,127 @@ TEST(ToolChanger, HaltMidLockLeavesAConditionTheResetReports) {
     const auto r = cell.run("AttachTool", cell.dock2, "urn:pnp:test:parallel");
     EXPECT_EQ(r.result, SkillResult::Failed);
     EXPECT_NE(r.message.find("intermediate"), std::string::npos) << r.message;
+}
+
+// A process names the dock, not the device: with no ToolAppUri the component takes the
+// server that appeared after the lock as the tool, sets its grip point and reports it.
+TEST(ToolChanger, AttachWithoutToolAppUriLearnsTheToolFromDiscovery) {
+    Cell cell;
+    const auto r = cell.run("AttachTool", cell.dock2);
+    ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
+    EXPECT_EQ(cell.model.attached, 2);
+    const auto calls = cell.robot->takeToolCalls();
+    ASSERT_EQ(calls.size(), 2u);
+    EXPECT_EQ(calls[1].rfind("SetTool Parallel 0.2028", 0), 0u) << calls[1];
+    EXPECT_EQ(phaseNames(r),
+              (std::vector<std::string>{"Approach", "Lock", "Leave", "ToolDetected"}));
+    EXPECT_EQ(resultText(r, "ToolAppUri"), "urn:pnp:test:parallel");
+    EXPECT_EQ(resultText(r, "ToolName"), "Parallel");
+    EXPECT_EQ(resultText(r, "ToolEndpoint"), cell.parallel->url());
+    EXPECT_EQ(resultId(r), 2);
+    EXPECT_TRUE(sameDock(resultDock(r), cell.dock2));
+    EXPECT_EQ(*cell.value({"CurrentTool", "ApplicationUri"}).scalar<ua::String>(),
+              "urn:pnp:test:parallel");
+    EXPECT_EQ(*cell.value({"CurrentTool", "Description"}).scalar<ua::String>(), "Parallel");
+    EXPECT_EQ(*cell.value({"CurrentTool", "Endpoint"}).scalar<ua::String>(), cell.parallel->url());
+
+    // The same dock again: its tool is on the flange already (nothing moves).
+    cell.robot->takeTargets();
+    const auto again = cell.run("ChangeTool", cell.dock2);
+    ASSERT_EQ(again.result, SkillResult::Completed) << again.message;
+    EXPECT_NE(again.message.find("already attached"), std::string::npos) << again.message;
+    EXPECT_TRUE(cell.robot->takeTargets().empty());
+    EXPECT_EQ(resultText(again, "ToolAppUri"), "urn:pnp:test:parallel");
+    EXPECT_TRUE(sameDock(resultDock(again), cell.dock2));
+}
+
+// An operator swaps the tool in dock 2 (the parallel gripper out, another tool in): the next
+// ChangeTool to dock 2 attaches and reports the tool really there; DetachTool / DropTool
+// report the tool they parked.
+TEST(ToolChanger, ASwappedToolInADockIsLearnedAnew) {
+    Cell cell;
+    auto r = cell.run("ChangeTool", cell.dock2);
+    ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
+    EXPECT_EQ(resultText(r, "ToolAppUri"), "urn:pnp:test:parallel");
+    r = cell.run("ChangeTool", cell.dock1);
+    ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
+    EXPECT_EQ(resultText(r, "ToolAppUri"), "urn:pnp:test:vacuum");
+    EXPECT_EQ(resultId(r), 1);
+    EXPECT_TRUE(sameDock(resultDock(r), cell.dock1));
+    EXPECT_EQ(cell.model.docks[1].tool, 2);
+
+    // The operator: the parallel gripper onto the shelf, tool 3 into dock 2.
+    {
+        std::lock_guard l(cell.model.m);
+        cell.model.docks[1].tool = 3;
+    }
+    cell.robot->takeToolCalls();
+    r = cell.run("ChangeTool", cell.dock2);
+    ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
+    EXPECT_EQ(cell.model.attached, 3);
+    EXPECT_EQ(cell.model.docks[0].tool, 1);  // the vacuum gripper back in dock 1
+    EXPECT_EQ(resultText(r, "ToolAppUri"), "urn:pnp:test:wsg");
+    EXPECT_EQ(resultText(r, "ToolName"), "Wsg");
+    EXPECT_EQ(resultText(r, "ToolEndpoint"), cell.wsg->url());
+    EXPECT_EQ(resultId(r), 3);
+    EXPECT_TRUE(sameDock(resultDock(r), cell.dock2));
+    EXPECT_EQ(cell.robot->takeToolCalls().back().rfind("SetTool Wsg 0.195", 0), 0u);
+    EXPECT_EQ(*cell.value({"CurrentTool", "ApplicationUri"}).scalar<ua::String>(),
+              "urn:pnp:test:wsg");
+    EXPECT_EQ(*cell.value({"CurrentTool", "Id"}).scalar<ua::Int32>(), 3);
+
+    // DropTool parks it where it came from and says which tool it parked where.
+    const auto d = cell.run("DropTool");
+    ASSERT_EQ(d.result, SkillResult::Completed) << d.message;
+    EXPECT_EQ(cell.model.docks[1].tool, 3);
+    EXPECT_EQ(resultText(d, "ToolAppUri"), "urn:pnp:test:wsg");
+    EXPECT_EQ(resultId(d), 3);
+    EXPECT_TRUE(sameDock(resultDock(d), cell.dock2));
+    EXPECT_EQ(*cell.value({"CurrentTool", "ApplicationUri"}).scalar<ua::String>(), "");
+
+    // DetachTool too.
+    ASSERT_EQ(cell.run("AttachTool", cell.dock1).result, SkillResult::Completed);
+    const auto t = cell.run("DetachTool", cell.dock1);
+    ASSERT_EQ(t.result, SkillResult::Completed) << t.message;
+    EXPECT_EQ(resultText(t, "ToolAppUri"), "urn:pnp:test:vacuum");
+    EXPECT_EQ(resultId(t), 1);
+    EXPECT_TRUE(sameDock(resultDock(t), cell.dock1));
+}
+
+// A tool whose server never comes up: Failed after toolDetectTimeout, saying so; a server
+// that was up before the lock (not the tool's) is not taken for it.
+TEST(ToolChanger, NoToolServerAfterTheLockFails) {
+    Cell cell;
+    {
+        std::lock_guard l(cell.model.m);
+        cell.model.docks[2].tool = 4;  // dock 3: a tool without a server
+    }
+    cell.changer->detector().addServer(cell.wsg->url());  // up before the lock
+    ASSERT_TRUE(cell.changer->detector().waitUntil(
+        [](const auto& d) { return !d.find(skill::types::GripperSkillType).empty(); }, 5000ms));
+    const auto started = std::chrono::steady_clock::now();
+    const auto r = cell.run("AttachTool", cell.dock3);
+    EXPECT_EQ(r.result, SkillResult::Failed);
+    EXPECT_NE(r.message.find("tool 4 locked but no tool server appeared within 3000 ms"),
+              std::string::npos)
+        << r.message;
+    EXPECT_GE(std::chrono::steady_clock::now() - started, 3000ms);
+    EXPECT_EQ(cell.model.attached, 4);  // locked: the changer says so
+    EXPECT_EQ(resultId(r), 4);
+    EXPECT_EQ(resultText(r, "ToolAppUri"), "");
+    EXPECT_TRUE(sameDock(resultDock(r), cell.dock3));
+    EXPECT_EQ(*cell.value({"CurrentTool", "Id"}).scalar<ua::Int32>(), 4);
+    EXPECT_EQ(*cell.value({"CurrentTool", "ApplicationUri"}).scalar<ua::String>(), "");
+}
+
+// Given a ToolAppUri, FinalResultData names that tool as before.
+TEST(ToolChanger, NamedToolIsReportedInTheFinalResult) {
+    Cell cell;
+    const auto r = cell.run("ChangeTool", cell.dock1, "urn:pnp:test:vacuum");
+    ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
+    EXPECT_EQ(resultText(r, "ToolAppUri"), "urn:pnp:test:vacuum");
+    EXPECT_EQ(resultText(r, "ToolName"), "Vacuum");
+    EXPECT_EQ(resultText(r, "ToolEndpoint"), cell.vacuum->url());
+    EXPECT_EQ(resultId(r), 1);
+    EXPECT_TRUE(sameDock(resultDock(r), cell.dock1));
 }

@@ -63,6 +63,43 @@ struct CurrentTool {
     std::string toolFrame;  // the name given to the robot's SetTool ("" = none set)
 };
 
+// The tool a run attached or parked, for its FinalResultData (the MES records "the dock at
+// ToolPosition holds the tool with ApplicationUri ToolAppUri").
+struct ToolRecord {
+    int id = 0;
+    std::string applicationUri, name, endpoint;
+    std::optional<Isometry3d> dock;
+};
+
+// When each server's skills last appeared in the detector (its change events), keyed by
+// ApplicationUri (else URL): a tool's server is one whose skills appeared after the lock,
+// even when an earlier run of the same server was still listed then.
+struct Appearances {
+    static constexpr std::size_t kMaxServers = 4096;  // bound on what the network can make us hold
+    std::mutex mutex;
+    std::map<std::string, Clock::time_point> lastAdded;
+    void added(const std::string& key) {
+        std::lock_guard l(mutex);
+        if (lastAdded.size() >= kMaxServers && !lastAdded.contains(key)) {
+            auto oldest = lastAdded.begin();
+            for (auto it = lastAdded.begin(); it != lastAdded.end(); ++it)
+                if (it->second < oldest->second) oldest = it;
+            lastAdded.erase(oldest);
+        }
+        lastAdded[key] = Clock::now();
+    }
+    std::optional<Clock::time_point> when(const std::string& key) {
+        std::lock_guard l(mutex);
+        auto it = lastAdded.find(key);
+        if (it == lastAdded.end()) return std::nullopt;
+        return it->second;
+    }
+};
+
+std::string serverKey(const skill::detector::DetectedSkill& s) {
+    return s.componentUri.empty() ? ua::discovery::normaliseUrl(s.endpointUrl) : s.componentUri;
+}
+
 // The outcome of a sequence step: empty = go on.
 struct Stop {
     skill::SkillResult result = skill::SkillResult::Failed;
@@ -75,6 +112,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
     ua::server::Server& server;
     ToolChangerOptions options;
     std::unique_ptr<skill::detector::SkillDetector> detector;
+    std::shared_ptr<Appearances> appearances = std::make_shared<Appearances>();
     std::unique_ptr<skill::server::SkillController> controller;
     ua::NodeId hasToolNode, toolIdNode, toolDescriptionNode, toolEndpointNode, toolUriNode,
         conditionNode;
@@ -246,6 +284,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         Isometry3d dock = Isometry3d::Identity();  // the dock the sequence works at
         std::string prefix;                        // "Detach." / "Attach." within ChangeTool
         bool halted = false;
+        ToolRecord tool;  // attached (attach) or parked (detach) so far
     };
 
     void beginPhase(Run& r, const std::string& name) {
@@ -324,6 +363,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
 
     std::optional<Stop> attach(Run& r, const Isometry3d& dock, const std::string& appUri) {
         r.dock = dock;
+        r.tool = ToolRecord{};
         const auto [open, openAbove, lockedAbove, where] = dockPoses(dock);
 
         const AdcSample pre = currentState(r);
@@ -359,6 +399,8 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
                             ", expected ready" + recover(r, {openAbove})};
         }
         beginPhase(r, "Lock");
+        // A tool's power comes on with the lock: its server appears after this.
+        const auto lockStart = Clock::now();
         if (auto s = move(r, dock, options.dockVelocity)) {
             if (s->result == skill::SkillResult::Failed)
                 s->message += recover(r, {open, openAbove});
@@ -395,42 +437,44 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         }
         {
             std::lock_guard l(mutex);
+            // A dock holds one tool: what an earlier attach learned about it goes (an
+            // operator may have swapped the tool in it since).
+            std::erase_if(docks, [&](const auto& d) { return samePose(d.second, dock); });
             docks[toolId] = dock;
             current = CurrentTool{toolId, appUri, {}, {}, {}};
         }
+        r.tool = ToolRecord{toolId, appUri, {}, {}, dock};
         publishTool();
 
-        if (appUri.empty()) {
-            endPhase(r);
-            return std::nullopt;
-        }
         beginPhase(r, "ToolDetected");
         std::vector<skill::detector::DetectedSkill> toolSkills;
-        const auto end = Clock::now() + options.toolDetectTimeout;
-        auto ofTool = [&appUri](const skill::detector::SkillDetector& d) {
-            std::vector<skill::detector::DetectedSkill> out;
-            for (auto& s : d.all())
-                if (s.componentUri == appUri) out.push_back(s);
-            return out;
-        };
-        while (!r.stop.stop_requested()) {
-            toolSkills = ofTool(*detector);
-            if (!toolSkills.empty() || Clock::now() >= end) break;
-            detector->waitUntil([&](const auto& d) { return !ofTool(d).empty(); }, 50ms);
-        }
+        std::string error;
+        if (appUri.empty())
+            toolSkills = newToolServer(r, lockStart, error);
+        else
+            toolSkills = namedToolServer(r, appUri);
         if (r.stop.stop_requested()) {
             r.halted = true;
             return Stop{skill::SkillResult::Aborted, "halted"};
         }
+        if (!error.empty())
+            return Stop{skill::SkillResult::Failed,
+                        "tool " + std::to_string(toolId) + " locked, but " + error};
         if (toolSkills.empty())
             return Stop{skill::SkillResult::Failed,
-                        "tool " + std::to_string(toolId) + " is locked, but no server " + appUri +
-                            " with skills was detected within " +
-                            std::to_string(options.toolDetectTimeout.count()) + " ms"};
+                        appUri.empty()
+                            ? "tool " + std::to_string(toolId) +
+                                  " locked but no tool server appeared within " +
+                                  std::to_string(options.toolDetectTimeout.count()) + " ms"
+                            : "tool " + std::to_string(toolId) + " is locked, but no server " +
+                                  appUri + " with skills was detected within " +
+                                  std::to_string(options.toolDetectTimeout.count()) + " ms"};
         const double detectedAfterLock =
             std::chrono::duration<double>(Clock::now() - lockedAt).count();
         endPhase(r);
         const auto& first = toolSkills.front();
+        const std::string toolUri = first.componentUri;
+        r.tool = ToolRecord{toolId, toolUri, first.componentName, first.endpointUrl, dock};
         std::string frameName =
             first.componentName.empty() ? "tool-" + std::to_string(toolId) : first.componentName;
         std::string note;
@@ -445,12 +489,94 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         {
             std::lock_guard l(mutex);
             current =
-                CurrentTool{toolId, appUri, first.componentName, first.endpointUrl, frameName};
+                CurrentTool{toolId, toolUri, first.componentName, first.endpointUrl, frameName};
         }
         publishTool();
-        options.log("tool " + std::to_string(toolId) + " (" + appUri + ") detected " +
-                    formatSeconds(detectedAfterLock) + " after the lock" + note);
+        // When its skills appeared (the detector's event), from the changer's "tool N": the
+        // latency of power-up + announcement + discovery, which runs during Leave.
+        std::string appeared;
+        if (auto when = appearances->when(serverKey(first)))
+            appeared = ", its skills appeared " +
+                       formatSeconds(std::chrono::duration<double>(*when - lockedAt).count()) +
+                       " after the lock";
+        options.log("tool " + std::to_string(toolId) + " (" + toolUri + " at " + first.endpointUrl +
+                    ") detected " + formatSeconds(detectedAfterLock) + " after the lock" +
+                    appeared + (appUri.empty() ? " (learned)" : "") + note);
         return std::nullopt;
+    }
+
+    // The skills of the server with ApplicationUri `appUri`, once the detector has them
+    // (within toolDetectTimeout; empty: not detected or halted).
+    std::vector<skill::detector::DetectedSkill> namedToolServer(Run& r, const std::string& appUri) {
+        std::vector<skill::detector::DetectedSkill> toolSkills;
+        const auto end = Clock::now() + options.toolDetectTimeout;
+        auto ofTool = [&appUri](const skill::detector::SkillDetector& d) {
+            std::vector<skill::detector::DetectedSkill> out;
+            for (auto& s : d.all())
+                if (s.componentUri == appUri) out.push_back(s);
+            return out;
+        };
+        while (!r.stop.stop_requested()) {
+            toolSkills = ofTool(*detector);
+            if (!toolSkills.empty() || Clock::now() >= end) break;
+            detector->waitUntil([&](const auto& d) { return !ofTool(d).empty(); }, 50ms);
+        }
+        return toolSkills;
+    }
+
+    // The tool that was just locked, learned from discovery: the server whose skills appeared
+    // in the detector after `lockStart` (the tool's power comes on with the lock), other than
+    // the robot, the ADC board and this component. A server with gripper skills is taken
+    // before others; two such servers at once are ambiguous (`error`). Its skills, within
+    // toolDetectTimeout; empty: none appeared (or halted, or `error`).
+    std::vector<skill::detector::DetectedSkill> newToolServer(Run& r, Clock::time_point lockStart,
+                                                              std::string& error) {
+        std::set<std::string> excludedUrls = {ua::discovery::normaliseUrl(r.arm->endpointUrl()),
+                                              ua::discovery::normaliseUrl(r.adc->url())};
+        const std::string self = server.config().applicationUri;
+        auto candidates = [&](const skill::detector::SkillDetector& d) {
+            std::map<std::string, std::vector<skill::detector::DetectedSkill>> byServer;
+            std::set<std::string> excluded;
+            for (auto& s : d.all()) {
+                const std::string key = serverKey(s);
+                if (excludedUrls.contains(ua::discovery::normaliseUrl(s.endpointUrl)) ||
+                    (!self.empty() && s.componentUri == self))
+                    excluded.insert(key);
+                byServer[key].push_back(s);
+            }
+            for (const auto& k : excluded) byServer.erase(k);
+            std::erase_if(byServer, [&](const auto& kv) {
+                const auto when = appearances->when(kv.first);
+                return !when || *when < lockStart;
+            });
+            return byServer;
+        };
+        auto isGripper = [](const std::vector<skill::detector::DetectedSkill>& skills) {
+            return std::any_of(skills.begin(), skills.end(),
+                               [](const auto& s) { return s.isA(skill::types::GripperSkillType); });
+        };
+        const auto end = Clock::now() + options.toolDetectTimeout;
+        while (!r.stop.stop_requested()) {
+            auto found = candidates(*detector);
+            if (!found.empty()) {
+                std::vector<std::string> grippers, all;
+                for (const auto& [key, skills] : found) {
+                    all.push_back(key);
+                    if (isGripper(skills)) grippers.push_back(key);
+                }
+                const auto& pick = grippers.empty() ? all : grippers;
+                if (pick.size() == 1) return found.at(pick.front());
+                error = "several servers appeared after the lock (";
+                for (std::size_t i = 0; i < pick.size(); ++i)
+                    error +=
+                        (i ? ", " : "") + pick[i] + " at " + found.at(pick[i]).front().endpointUrl;
+                error += "): name the tool with ToolAppUri";
+                return {};
+            }
+            if (Clock::now() >= end) break;
+            detector->waitUntil([&](const auto& d) { return !candidates(d).empty(); }, 50ms);
+        }
+        return {};
     }
 
     // GripPoints/GripPoint_1/Offset (else the first grip point) below a controller of the
@@ -515,6 +641,12 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             return Stop{skill::SkillResult::Failed, why};
         }
         const int toolId = pre.reading.toolId;
+        {
+            std::lock_guard l(mutex);
+            r.tool = current.id == toolId ? ToolRecord{toolId, current.applicationUri, current.name,
+                                                       current.endpoint, dock}
+                                          : ToolRecord{toolId, {}, {}, {}, dock};
+        }
         if (auto e = r.arm->clearTool(""); !e.empty()) return Stop{skill::SkillResult::Failed, e};
 
         beginPhase(r, "Approach");
@@ -638,8 +770,12 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
                     break;
                 }
                 if (isTool(s)) {
-                    if (from && samePose(*from, dock) && !appUri.empty() &&
-                        cur.applicationUri == appUri) {
+                    // The tool of that dock is on the flange already ("" = whichever tool
+                    // the dock held; else the one named).
+                    if (from && samePose(*from, dock) &&
+                        (appUri.empty() || cur.applicationUri == appUri)) {
+                        r.tool =
+                            ToolRecord{cur.id, cur.applicationUri, cur.name, cur.endpoint, *from};
                         done = "already attached";
                         break;
                     }
@@ -703,16 +839,18 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             setCondition(report);
             writeFinalMessage(skillNode, report);
             options.log(report);
-            return Outcome::aborted(report)
-                .with("Phases", ua::Variant(names))
-                .with("PhaseDurations", ua::Variant(seconds));
+            return withTool(Outcome::aborted(report)
+                                .with("Phases", ua::Variant(names))
+                                .with("PhaseDurations", ua::Variant(seconds)),
+                            r.tool);
         }
         if (stop) {
             if (!before.empty()) stop->message += " (earlier: " + before + ")";
             options.log("failed: " + stop->message + (phaseText.empty() ? "" : "; " + phaseText));
-            return Outcome::failed(stop->message)
-                .with("Phases", ua::Variant(names))
-                .with("PhaseDurations", ua::Variant(seconds));
+            return withTool(Outcome::failed(stop->message)
+                                .with("Phases", ua::Variant(names))
+                                .with("PhaseDurations", ua::Variant(seconds)),
+                            r.tool);
         }
         setCondition("");
         CurrentTool cur;
@@ -722,13 +860,27 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         }
         std::string message = done;
         if (kind == Kind::Change || kind == Kind::Attach)
-            message +=
-                " " + std::to_string(cur.id) + (cur.name.empty() ? "" : " (" + cur.name + ")");
+            message += " " + std::to_string(cur.id) +
+                       (cur.name.empty() ? "" : " (" + cur.name + ", " + cur.applicationUri + ")");
         message += " in " + formatSeconds(total) + (phaseText.empty() ? "" : ": " + phaseText);
         options.log(message);
-        return Outcome::completed(message)
-            .with("Phases", ua::Variant(names))
-            .with("PhaseDurations", ua::Variant(seconds));
+        return withTool(Outcome::completed(message)
+                            .with("Phases", ua::Variant(names))
+                            .with("PhaseDurations", ua::Variant(seconds)),
+                        r.tool);
+    }
+
+    // FinalResultData's tool (IToolChangeResultType): every run writes all five, so that
+    // nothing of an earlier run's tool stays there (0 / "" / null: none).
+    static Outcome withTool(Outcome o, const ToolRecord& t) {
+        o.with("ToolAppUri", ua::Variant(ua::String(t.applicationUri)))
+            .with("ToolName", ua::Variant(ua::String(t.name)))
+            .with("ToolEndpoint", ua::Variant(ua::String(t.endpoint)))
+            .with("ToolId", ua::Variant(ua::Int32{t.id}))
+            .with("ToolPosition", t.dock ? skill::server::ParamTraits<ua::ThreeDFrame>::toVariant(
+                                               ua::spatial::toFrame(*t.dock))
+                                         : ua::Variant());
+        return o;
     }
 
     // FinalResultData/Message of the halted skill: Halt set it at once ("halted"); what the
@@ -823,6 +975,10 @@ ToolChangerComponent::ToolChangerComponent(ua::server::Server& server, ToolChang
         {frame(), endpoint()});
     add(skill_names::DropTool, types::DropToolSkillType, K::Drop, {});
     m.detector = std::make_unique<skill::detector::SkillDetector>(mdns, m.options.detector);
+    m.detector->onChange(
+        [appearances = m.appearances](const skill::detector::DetectedSkill& s, bool added) {
+            if (added) appearances->added(serverKey(s));
+        });
 }
 
 ToolChangerComponent::~ToolChangerComponent() { stop(); }

@@ -8,8 +8,11 @@
 // The docking sequence, in flange poses (world frame); D = the dock's pose (ToolPosition),
 // O = D·Rz(−lockAngle) the open pose, ↑ = raised liftHeight along world z:
 //   attach: LIN O↑, LIN O (ADC: ready), LIN D (turn: tool N), LIN D↑ (the tool comes along),
-//           then the tool's server (ToolAppUri) is waited for in the skill detector and the
-//           robot's SetTool gets the tool's grip point (IGripperType GripPoints/GripPoint_1)
+//           then the tool's server is waited for in the skill detector (ToolAppUri, or ""
+//           = learned: the server that appeared after the lock) and the robot's SetTool gets
+//           the tool's grip point (IGripperType GripPoints/GripPoint_1); FinalResultData
+//           names the tool attached or parked (ToolAppUri, ToolName, ToolEndpoint, ToolId,
+//           ToolPosition)
 //   detach: LIN D↑, LIN D (tool N), LIN O (turn: ready), LIN O↑; then ClearTool
 // A failed check ends the run Failed with the reason, after moving the robot back clear of
 // the dock (turning the ring back first when it turned). Halt halts the robot's move and
