@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
-# The "main job": set up, build (release) and run the simulated cell in the foreground
-# (scripts/sim_cell.sh: an LDS-ME on the cell bus, two workstations, four devices in network
-# namespaces, `pnp discover` showing them come and go) until Ctrl-C.
-#   scripts/run.sh            the simulated cell (root: network namespaces)
-#   scripts/run.sh --server [extra args for `pnp ua serve`]
-#                             only the demo server on port $PNP_PORT (default 4840)
-#   PNP_SIM_SECONDS=N         stop the cell after N s (default: run until Ctrl-C)
+# The "main job": set up, build (release) and run the simulated Plug & Produce cell end to end
+# (`pnp cell run`, src/cell/README.md): the cell bus (LDS-ME, semantic MES), `pnp sim` with the
+# thesis cell, every device and component plugged in one at a time (plug-in -> skills detected
+# printed for each), the thesis process through the MES, the operator's swap of the Robotiq
+# in dock 2 for a WSG 50, the same process again, a report (text here, JSON in
+# ./cell-report.json). Exits non-zero if a step failed or the cube is off by more than 1 mm.
+#   scripts/run.sh [pnp cell run options]   e.g. --netns (root), --report FILE, --log-dir DIR
+#   scripts/run.sh --up [options]           the same cell left running until Ctrl-C
+#   scripts/run.sh --server [args]          only the demo server on port $PNP_PORT (4840)
+# PNP_SIM_SECONDS is gone: the main job ends by itself (about 1-2 minutes); `--up` runs
+# until Ctrl-C.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$ROOT/scripts/setup.sh"
@@ -13,10 +17,20 @@ bash "$ROOT/scripts/setup.sh"
 # command builds the rest of the same tree.
 bash "$ROOT/scripts/build.sh" release pnp
 PNP="$ROOT/build/apps/pnp/pnp"
-if [[ "${1:-}" != "--server" ]] && [[ $(id -u) -eq 0 ]] && ip netns list >/dev/null 2>&1; then
-    exec bash "$ROOT/scripts/sim_cell.sh" "$PNP"
-fi
-[[ "${1:-}" == "--server" ]] && shift
-PORT="${PNP_PORT:-4840}"
-echo "[run] $PNP ua serve --port $PORT $*"
-exec "$PNP" ua serve --port "$PORT" "$@"
+case "${1:-}" in
+--server)
+    shift
+    PORT="${PNP_PORT:-4840}"
+    echo "[run] $PNP ua serve --port $PORT $*"
+    exec "$PNP" ua serve --port "$PORT" "$@"
+    ;;
+--up)
+    shift
+    echo "[run] $PNP cell up $*"
+    exec "$PNP" cell up "$@"
+    ;;
+*)
+    echo "[run] $PNP cell run $*"
+    exec "$PNP" cell run "$@"
+    ;;
+esac

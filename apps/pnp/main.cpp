@@ -22,6 +22,9 @@ std::function<int()> addSimCommands(CLI::App& app);
 std::function<int()> addDeviceCommands(CLI::App& app);
 std::function<int()> addRobotCommands(CLI::App& app);
 std::function<int()> addComponentCommands(CLI::App& app);  // toolchanger_commands.cpp
+std::function<int()> addPickPlaceCommand(CLI::App& app);    // pickplace_commands.cpp
+std::function<int()> addCellCommands(CLI::App& app);       // cell_commands.cpp
+std::function<int()> addMesCommands(CLI::App& app);        // mes_commands.cpp
 }  // namespace pnp::cli
 
 namespace {
@@ -304,6 +307,9 @@ int main(int argc, char** argv) {
     const auto runDevice = addDeviceCommands(app);
     const auto runRobot = addRobotCommands(app);
     const auto runComponent = addComponentCommands(app);
+    const auto runPickPlace = addPickPlaceCommand(app);
+    const auto runCell = addCellCommands(app);
+    const auto runMes = addMesCommands(app);
 
     try {
         app.parse(argc, argv);
@@ -322,6 +328,9 @@ int main(int argc, char** argv) {
         if (const int rc = runDevice(); rc >= 0) return rc;
         if (const int rc = runRobot(); rc >= 0) return rc;
         if (const int rc = runComponent(); rc >= 0) return rc;
+        if (const int rc = runPickPlace(); rc >= 0) return rc;
+        if (const int rc = runCell(); rc >= 0) return rc;
+        if (const int rc = runMes(); rc >= 0) return rc;
         if (*serve) return runServe(serveOpts);
         if (*demoSkills) return runServe(skillsOpts);
         if (*skillsCmd) return runSkills(skillsListOpts);
