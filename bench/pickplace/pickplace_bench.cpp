@@ -102,6 +102,10 @@ int main(int argc, char** argv) {
     // The vacuum gripper.
     pnp::testing::FakeGripper hardware(device::gripper::GripKind::kVacuum);
     hardware.timeScale = 1000.0;
+    if (!hardware.connect(device::gripper::Clock::now() + 1s)) {
+        std::fprintf(stderr, "the fake gripper does not connect\n");
+        return 1;
+    }
     device::gripper::HardwareAccess access(hardware);
     ua::server::Server gripperServer(config("BenchGripper"));
     device::gripper::GripperDevice gripper(gripperServer, access, {.name = "BenchGripper"});
