@@ -8,6 +8,7 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <cmath>
 #include <functional>
 #include <iostream>
 #include <memory>
@@ -69,7 +70,8 @@ struct ToolChangerCliOptions {
     bool noMdns = false;
     int findTimeoutMs = 5000;
     int toolTimeoutMs = 15000;
-    int readyTimeoutMs = 0;  // 0: do not wait before serving
+    int readyTimeoutMs = 0;      // 0: do not wait before serving
+    double travelHeight = 0.10;  // m, world z
     ServeOptions serve;
 };
 
@@ -78,6 +80,7 @@ int runToolChanger(ToolChangerCliOptions& o) {
     for (const std::string* u : {&o.robot, &o.adc})
         if (*u != "auto" && !u->starts_with("opc.tcp://"))
             throw UsageError("--robot / --adc take an opc.tcp:// URL or auto, got \"" + *u + "\"");
+    if (!std::isfinite(o.travelHeight)) throw UsageError("--travel-height must be finite");
     if (o.serve.discovery.name.empty()) o.serve.discovery.name = "Tool changer";
     const sigset_t stopSignals = blockStopSignals();
 
@@ -102,6 +105,7 @@ int runToolChanger(ToolChangerCliOptions& o) {
     topt.detector.useDiscovery = mdns != nullptr || !o.serve.discovery.lds.empty();
     topt.findTimeout = std::chrono::milliseconds(o.findTimeoutMs);
     topt.toolDetectTimeout = std::chrono::milliseconds(o.toolTimeoutMs);
+    topt.travelHeight = o.travelHeight;
 
     return serveUntilStopped(
         o.serve, stopSignals, "pnp component toolchanger",
@@ -185,6 +189,12 @@ std::function<int()> addComponentCommands(CLI::App& app) {
     cmd->add_option("--tool-timeout", o->toolTimeoutMs,
                     "after a lock, wait this long (ms) for the tool's server and skills")
         ->capture_default_str();
+    cmd->add_option("--travel-height", o->travelHeight,
+                    "world z (m) that the tool's grip point (no tool: the flange) stays above "
+                    "while the arm travels to and from a dock; after an attach the tool is "
+                    "lifted to it")
+        ->capture_default_str()
+        ->check(CLI::Range(-10.0, 10.0));
     cmd->add_option("--wait-ready", o->readyTimeoutMs,
                     "at start, wait up to MS ms for the robot and the ADC and say so (0: no)")
         ->capture_default_str();

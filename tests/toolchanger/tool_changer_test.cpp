@@ -8,9 +8,11 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -40,6 +42,10 @@ using skill::SkillResult;
 namespace {
 
 constexpr double kLock = 0.5235987755982988;
+constexpr double kTravel = 0.10;    // ToolChangerOptions::travelHeight's default
+constexpr double kVacuum = 0.1868;  // the fake tools' grip points below the flange
+constexpr double kParallel = 0.2028;
+constexpr double kWsg = 0.1950;
 
 Isometry3d pose(double x, double y, double z, double a = 0, double b = 0, double c = 0) {
     ua::ThreeDFrame f;
@@ -53,6 +59,12 @@ Isometry3d openPose(const Isometry3d& d) {
 Isometry3d up(const Isometry3d& p) {
     Isometry3d q = p;
     q.translation().z() += 0.10;
+    return q;
+}
+// `p` at the world height z.
+Isometry3d atZ(const Isometry3d& p, double z) {
+    Isometry3d q = p;
+    q.translation().z() = z;
     return q;
 }
 bool near(const Isometry3d& a, const Isometry3d& b) {
@@ -127,18 +139,25 @@ struct ChangerModel {
 };
 
 // The robot: DeviceSet/FakeRobot with CartesianLinearMove (targets recorded; a turn in a
-// dock passes through "intermediate" halfway), SetTool and ClearTool.
+// dock passes through "intermediate" halfway), SetTool and ClearTool, and ActualFlangePose
+// (the model's flange) unless built without it.
 struct FakeRobot {
     ChangerModel& model;
     std::unique_ptr<ua::server::Server> server;
     std::unique_ptr<skill::server::SkillController> controller;
     std::mutex m;
     std::vector<Isometry3d> targets;
+    // Every line moved: from, to, and the tool on the flange meanwhile (0: none).
+    struct Line {
+        Isometry3d from, to;
+        int tool = 0;
+    };
+    std::vector<Line> lines;
     std::vector<std::string> toolCalls;  // "SetTool name x,y,z" / "ClearTool name"
     std::chrono::milliseconds moveTime{15};
     std::chrono::milliseconds turnTime{15};
 
-    explicit FakeRobot(ChangerModel& cm) : model(cm) {
+    explicit FakeRobot(ChangerModel& cm, bool flangePose = true) : model(cm) {
         auto cfg = pnp::testing::loopbackConfig();
         cfg.applicationUri = "urn:pnp:test:robot";
         server = std::make_unique<ua::server::Server>(cfg);
@@ -183,6 +202,22 @@ struct FakeRobot {
                 toolCalls.push_back("ClearTool " + (n ? *n : std::string("?")));
                 return ua::StatusCode{};
             }));
+        if (flangePose) {
+            ua::server::VariableAttributes a;
+            a.dataType = ua::NodeId(0, ua::ns0::ThreeDFrame);
+            a.value = ua::DataValue(ua::Variant(ua::toExtensionObject(ua::ThreeDFrame{})));
+            const ua::NodeId n =
+                space.addVariable(controller->node(), ua::NodeId(1, "FakeRobot.ActualFlangePose"),
+                                  ua::QualifiedName(rob, "ActualFlangePose"), a);
+            space.setValueCallback(
+                n, {.read =
+                        [this](const ua::NodeId&) {
+                            std::lock_guard l(model.m);
+                            return ua::DataValue(ua::Variant(
+                                ua::toExtensionObject(ua::spatial::toFrame(model.flange))));
+                        },
+                    .write = {}});
+        }
         server->start();
     }
     ~FakeRobot() {
@@ -200,9 +235,15 @@ struct FakeRobot {
             std::lock_guard l(m);
             targets.push_back(target);
         }
+        int tool = 0;
         {
             std::lock_guard l(model.m);
             from = model.flange;
+            tool = model.attached;
+        }
+        {
+            std::lock_guard l(m);
+            lines.push_back({from, target, tool});
         }
         const bool turn = (from.translation() - target.translation()).norm() < 1e-6 &&
                           model.inDock(target).has_value();
@@ -220,6 +261,10 @@ struct FakeRobot {
     std::vector<Isometry3d> takeTargets() {
         std::lock_guard l(m);
         return std::exchange(targets, {});
+    }
+    std::vector<Line> takeLines() {
+        std::lock_guard l(m);
+        return std::exchange(lines, {});
     }
     std::vector<std::string> takeToolCalls() {
         std::lock_guard l(m);
@@ -314,13 +359,13 @@ struct Cell {
     std::vector<std::string> log;
     std::mutex logMutex;
 
-    Cell() {
+    explicit Cell(bool flangePose = true) {
         model.docks = {{dock1, 1}, {dock2, 2}, {dock3, 0}};
-        robot = std::make_unique<FakeRobot>(model);
+        robot = std::make_unique<FakeRobot>(model, flangePose);
         adc = std::make_unique<FakeAdc>(model);
-        vacuum = std::make_unique<FakeTool>("urn:pnp:test:vacuum", "Vacuum", 0.1868);
-        parallel = std::make_unique<FakeTool>("urn:pnp:test:parallel", "Parallel", 0.2028);
-        wsg = std::make_unique<FakeTool>("urn:pnp:test:wsg", "Wsg", 0.1950);
+        vacuum = std::make_unique<FakeTool>("urn:pnp:test:vacuum", "Vacuum", kVacuum);
+        parallel = std::make_unique<FakeTool>("urn:pnp:test:parallel", "Parallel", kParallel);
+        wsg = std::make_unique<FakeTool>("urn:pnp:test:wsg", "Wsg", kWsg);
         auto cfg = pnp::testing::loopbackConfig();
         cfg.applicationUri = "urn:pnp:test:toolchanger";
         server = std::make_unique<ua::server::Server>(cfg);
@@ -413,6 +458,51 @@ bool sameDock(const std::optional<Isometry3d>& a, const Isometry3d& b) {
            Eigen::AngleAxisd(a->linear().transpose() * b.linear()).angle() < 1e-6;
 }
 
+// The lowest world z of what the flange carries (the flange, the tool's grip point) along a
+// line (position linear, orientation slerp, 200 samples) where it is more than 5 mm
+// (horizontally) from every dock; +inf when it is near a dock all along.
+double lowestAwayFromDocks(const FakeRobot::Line& l, const std::vector<Isometry3d>& docks) {
+    const double length = l.tool == 1   ? kVacuum
+                          : l.tool == 2 ? kParallel
+                          : l.tool == 3 ? kWsg
+                          : l.tool != 0 ? 0.25  // a tool without a server: the assumed length
+                                        : 0.0;
+    const Eigen::Quaterniond qa(l.from.linear()), qb(l.to.linear());
+    double lowest = std::numeric_limits<double>::infinity();
+    for (int i = 0; i <= 200; ++i) {
+        const double s = i / 200.0;
+        Isometry3d f = Isometry3d::Identity();
+        f.linear() = qa.slerp(s, qb).toRotationMatrix();
+        f.translation() = (1 - s) * l.from.translation() + s * l.to.translation();
+        const bool atDock = std::any_of(docks.begin(), docks.end(), [&](const Isometry3d& d) {
+            return (f.translation() - d.translation()).head<2>().norm() < 0.005;
+        });
+        if (atDock) continue;
+        lowest =
+            std::min({lowest, f.translation().z(), (f * pose(0, 0, length)).translation().z()});
+    }
+    return lowest;
+}
+// Every line away from the docks stays at or above the travel height; one that starts below
+// it (the arm was left there) goes straight up.
+void expectAboveTravelHeight(const std::vector<FakeRobot::Line>& lines,
+                             const std::vector<Isometry3d>& docks) {
+    for (std::size_t i = 0; i < lines.size(); ++i) {
+        const FakeRobot::Line& l = lines[i];
+        const double start = lowestAwayFromDocks({l.from, l.from, l.tool}, docks);
+        if (start < kTravel - 1e-9) {
+            EXPECT_LT((l.to.translation() - l.from.translation()).head<2>().norm(), 1e-9)
+                << "line " << i << " starts below the travel height and does not go straight up";
+            EXPECT_GT(l.to.translation().z(), l.from.translation().z()) << "line " << i;
+            EXPECT_TRUE(l.to.linear().isApprox(l.from.linear(), 1e-9)) << "line " << i;
+            continue;
+        }
+        EXPECT_GE(lowestAwayFromDocks(l, docks), kTravel - 1e-9)
+            << "line " << i << " to (" << l.to.translation().transpose() << ") with tool "
+            << l.tool;
+    }
+}
+
 std::vector<std::string> phaseNames(const skill::client::RunResult& r) {
     for (const auto& [name, v] : r.finalResult.values)
         if (name == "Phases")
@@ -427,18 +517,22 @@ TEST(ToolChanger, AttachRunsTheDockingSequenceAndSetsTheTool) {
     const auto r = cell.run("AttachTool", cell.dock2, "urn:pnp:test:parallel");
     ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
     const auto t = cell.robot->takeTargets();
-    ASSERT_EQ(t.size(), 4u);
-    EXPECT_TRUE(near(t[0], up(openPose(cell.dock2))));
-    EXPECT_TRUE(near(t[1], openPose(cell.dock2)));
-    EXPECT_TRUE(near(t[2], cell.dock2));
-    EXPECT_TRUE(near(t[3], up(cell.dock2)));
+    ASSERT_EQ(t.size(), 6u);
+    // From z 0.5 (above the travel height): across at that height, down above the dock.
+    EXPECT_TRUE(near(t[0], atZ(openPose(cell.dock2), 0.5)));
+    EXPECT_TRUE(near(t[1], up(openPose(cell.dock2))));
+    EXPECT_TRUE(near(t[2], openPose(cell.dock2)));
+    EXPECT_TRUE(near(t[3], cell.dock2));
+    EXPECT_TRUE(near(t[4], up(cell.dock2)));
+    // Clear: straight up until the grip point (0.2028 m below the flange) is at 0.10 m.
+    EXPECT_TRUE(near(t[5], atZ(cell.dock2, kTravel + kParallel)));
     EXPECT_EQ(cell.model.attached, 2);
     const auto calls = cell.robot->takeToolCalls();
     ASSERT_EQ(calls.size(), 2u);
     EXPECT_EQ(calls[0], "ClearTool ");
     EXPECT_EQ(calls[1].rfind("SetTool Parallel 0.2028", 0), 0u) << calls[1];
     EXPECT_EQ(phaseNames(r),
-              (std::vector<std::string>{"Approach", "Lock", "Leave", "ToolDetected"}));
+              (std::vector<std::string>{"Approach", "Lock", "Leave", "ToolDetected", "Clear"}));
     EXPECT_EQ(*cell.value({"HasTool"}).scalar<bool>(), true);
     EXPECT_EQ(*cell.value({"CurrentTool", "Id"}).scalar<ua::Int32>(), 2);
     EXPECT_EQ(*cell.value({"CurrentTool", "Description"}).scalar<ua::String>(), "Parallel");
@@ -462,10 +556,10 @@ TEST(ToolChanger, EmptyDockFailsAndTurnsBackClear) {
     EXPECT_EQ(r.result, SkillResult::Failed);
     EXPECT_NE(r.message.find("no tool in the dock"), std::string::npos) << r.message;
     const auto t = cell.robot->takeTargets();
-    ASSERT_EQ(t.size(), 5u);
-    EXPECT_TRUE(near(t[2], cell.dock3));
-    EXPECT_TRUE(near(t[3], openPose(cell.dock3)));      // turned back open
-    EXPECT_TRUE(near(t[4], up(openPose(cell.dock3))));  // clear of the dock
+    ASSERT_EQ(t.size(), 6u);
+    EXPECT_TRUE(near(t[3], cell.dock3));
+    EXPECT_TRUE(near(t[4], openPose(cell.dock3)));      // turned back open
+    EXPECT_TRUE(near(t[5], up(openPose(cell.dock3))));  // clear of the dock
     EXPECT_EQ(cell.model.lock, ChangerModel::Open);
 }
 
@@ -498,21 +592,27 @@ TEST(ToolChanger, ChangeToolDetachesIntoItsDockThenAttaches) {
     const auto r = cell.run("ChangeTool", cell.dock1, "urn:pnp:test:vacuum");
     ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
     const auto t = cell.robot->takeTargets();
-    ASSERT_EQ(t.size(), 8u);
+    // From the first change's Clear pose straight down to above dock 2 (the same x, y).
+    ASSERT_EQ(t.size(), 11u);
     EXPECT_TRUE(near(t[0], up(cell.dock2)));
     EXPECT_TRUE(near(t[1], cell.dock2));
     EXPECT_TRUE(near(t[2], openPose(cell.dock2)));
     EXPECT_TRUE(near(t[3], up(openPose(cell.dock2))));
-    EXPECT_TRUE(near(t[6], cell.dock1));
+    // Without a tool the flange itself rises to the travel height, crosses, goes down.
+    EXPECT_TRUE(near(t[4], atZ(openPose(cell.dock2), kTravel)));
+    EXPECT_TRUE(near(t[5], atZ(openPose(cell.dock1), kTravel)));
+    EXPECT_TRUE(near(t[6], up(openPose(cell.dock1))));
+    EXPECT_TRUE(near(t[8], cell.dock1));
+    EXPECT_TRUE(near(t[10], atZ(cell.dock1, kTravel + kVacuum)));
     EXPECT_EQ(cell.model.attached, 1);
     EXPECT_EQ(cell.model.docks[1].tool, 2);  // the parallel gripper back in dock 2
     const auto calls = cell.robot->takeToolCalls();
     EXPECT_NE(std::find(calls.begin(), calls.end(), "ClearTool Parallel"), calls.end());
     EXPECT_EQ(calls.back().rfind("SetTool Vacuum 0.1868", 0), 0u);
     const auto names = phaseNames(r);
-    ASSERT_EQ(names.size(), 7u);
+    ASSERT_EQ(names.size(), 8u);
     EXPECT_EQ(names.front(), "Detach.Approach");
-    EXPECT_EQ(names.back(), "Attach.ToolDetected");
+    EXPECT_EQ(names.back(), "Attach.Clear");
     EXPECT_EQ(*cell.value({"CurrentTool", "Id"}).scalar<ua::Int32>(), 1);
 
     // DropTool puts it back where it came from.
@@ -555,7 +655,8 @@ TEST(ToolChanger, HaltMidLockLeavesAConditionTheResetReports) {
     EXPECT_EQ(*cell.value({"Condition"}).scalar<ua::String>(), condition);
     // The robot's move was halted: no target after the turn.
     const auto t = cell.robot->takeTargets();
-    ASSERT_EQ(t.size(), 3u);
+    ASSERT_EQ(t.size(), 4u);
+    EXPECT_TRUE(near(t.back(), cell.dock2));
     // The next attach sees the half-locked changer and refuses, saying so.
     cell.robot->turnTime = 15ms;
     const auto r = cell.run("AttachTool", cell.dock2, "urn:pnp:test:parallel");
@@ -574,7 +675,7 @@ TEST(ToolChanger, AttachWithoutToolAppUriLearnsTheToolFromDiscovery) {
     ASSERT_EQ(calls.size(), 2u);
     EXPECT_EQ(calls[1].rfind("SetTool Parallel 0.2028", 0), 0u) << calls[1];
     EXPECT_EQ(phaseNames(r),
-              (std::vector<std::string>{"Approach", "Lock", "Leave", "ToolDetected"}));
+              (std::vector<std::string>{"Approach", "Lock", "Leave", "ToolDetected", "Clear"}));
     EXPECT_EQ(resultText(r, "ToolAppUri"), "urn:pnp:test:parallel");
     EXPECT_EQ(resultText(r, "ToolName"), "Parallel");
     EXPECT_EQ(resultText(r, "ToolEndpoint"), cell.parallel->url());
@@ -684,4 +785,97 @@ TEST(ToolChanger, NamedToolIsReportedInTheFinalResult) {
     EXPECT_EQ(resultText(r, "ToolEndpoint"), cell.vacuum->url());
     EXPECT_EQ(resultId(r), 1);
     EXPECT_TRUE(sameDock(resultDock(r), cell.dock1));
+}
+
+// From low over the table (the flange 6 cm above it), an attach first rises to the travel
+// height, crosses to above the dock, goes down, and after the lock lifts the tool until its
+// grip point is at the travel height: no line away from the dock dips below it.
+TEST(ToolChanger, AttachFromLowOverTheTableRisesFirstAndLeavesTheToolClear) {
+    Cell cell;
+    {
+        std::lock_guard l(cell.model.m);
+        cell.model.flange = pose(0.05, 0.10, 0.06, M_PI, 0, 0);
+    }
+    const auto r = cell.run("AttachTool", cell.dock2, "urn:pnp:test:parallel");
+    ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
+    const auto t = cell.robot->takeTargets();
+    ASSERT_EQ(t.size(), 7u);
+    EXPECT_TRUE(near(t[0], pose(0.05, 0.10, kTravel, M_PI, 0, 0)));  // straight up
+    EXPECT_TRUE(near(t[1], atZ(openPose(cell.dock2), kTravel)));     // across
+    EXPECT_TRUE(near(t[2], up(openPose(cell.dock2))));               // down to O↑
+    EXPECT_TRUE(near(t[5], up(cell.dock2)));
+    EXPECT_TRUE(near(t[6], atZ(cell.dock2, kTravel + kParallel)));  // Clear
+    const auto lines = cell.robot->takeLines();
+    ASSERT_EQ(lines.size(), t.size());
+    expectAboveTravelHeight(lines, {cell.dock1, cell.dock2, cell.dock3});
+    // SetTool comes after the Clear move (its targets are flange poses).
+    const auto calls = cell.robot->takeToolCalls();
+    ASSERT_EQ(calls.size(), 2u);
+    EXPECT_EQ(calls[1].rfind("SetTool Parallel", 0), 0u) << calls[1];
+}
+
+// Pick-and-place left the vacuum gripper's tip 5 cm above the table: ChangeTool first lifts
+// it to the travel height, crosses, parks it, and brings the next tool up clear. A straight
+// line to above the dock (as before) would have dipped the tool below the travel height.
+TEST(ToolChanger, ChangeToolFromAboveTheTableStaysAboveTheTravelHeight) {
+    Cell cell;
+    ASSERT_EQ(cell.run("ChangeTool", cell.dock1, "urn:pnp:test:vacuum").result,
+              SkillResult::Completed);
+    cell.robot->takeTargets();
+    cell.robot->takeLines();
+    const Isometry3d overTable = pose(0.05, 0.10, 0.05 + kVacuum, M_PI, 0, 0);
+    {
+        std::lock_guard l(cell.model.m);
+        cell.model.flange = overTable;
+    }
+    const std::vector<Isometry3d> docks = {cell.dock1, cell.dock2, cell.dock3};
+    // The check is not vacuous: the direct line from there to above the dock goes below.
+    EXPECT_LT(lowestAwayFromDocks({overTable, up(cell.dock1), 1}, docks), kTravel - 0.05);
+
+    const auto r = cell.run("ChangeTool", cell.dock2, "urn:pnp:test:parallel");
+    ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
+    const auto t = cell.robot->takeTargets();
+    ASSERT_EQ(t.size(), 13u);
+    EXPECT_TRUE(near(t[0], atZ(overTable, kTravel + kVacuum)));   // up
+    EXPECT_TRUE(near(t[1], atZ(cell.dock1, kTravel + kVacuum)));  // across
+    EXPECT_TRUE(near(t[2], up(cell.dock1)));                      // down to D↑
+    EXPECT_TRUE(near(t[3], cell.dock1));
+    EXPECT_TRUE(near(t[5], up(openPose(cell.dock1))));            // parked
+    EXPECT_TRUE(near(t[6], atZ(openPose(cell.dock1), kTravel)));  // the flange up
+    EXPECT_TRUE(near(t[7], atZ(openPose(cell.dock2), kTravel)));  // across
+    EXPECT_TRUE(near(t[8], up(openPose(cell.dock2))));
+    EXPECT_TRUE(near(t[12], atZ(cell.dock2, kTravel + kParallel)));  // Clear
+    expectAboveTravelHeight(cell.robot->takeLines(), docks);
+    EXPECT_EQ(cell.model.attached, 2);
+    EXPECT_EQ(cell.model.docks[0].tool, 1);
+
+    // DropTool from over the table too.
+    {
+        std::lock_guard l(cell.model.m);
+        cell.model.flange = pose(-0.05, -0.10, 0.03 + kParallel, M_PI, 0, 0);
+    }
+    const auto d = cell.run("DropTool");
+    ASSERT_EQ(d.result, SkillResult::Completed) << d.message;
+    const auto dt = cell.robot->takeTargets();
+    ASSERT_EQ(dt.size(), 6u);
+    EXPECT_TRUE(near(dt[0], pose(-0.05, -0.10, kTravel + kParallel, M_PI, 0, 0)));
+    expectAboveTravelHeight(cell.robot->takeLines(), docks);
+    EXPECT_EQ(cell.model.docks[1].tool, 2);
+}
+
+// A robot without ActualFlangePose: where the arm is is unknown, so the approach is the one
+// line to above the dock (as before), and the log says so.
+TEST(ToolChanger, WithoutTheRobotsPoseTheApproachIsOneLineAndTheLogSaysSo) {
+    Cell cell(false);
+    const auto r = cell.run("AttachTool", cell.dock2, "urn:pnp:test:parallel");
+    ASSERT_EQ(r.result, SkillResult::Completed) << r.message;
+    const auto t = cell.robot->takeTargets();
+    ASSERT_EQ(t.size(), 5u);
+    EXPECT_TRUE(near(t[0], up(openPose(cell.dock2))));
+    EXPECT_TRUE(near(t[4], atZ(cell.dock2, kTravel + kParallel)));  // Clear still
+    std::lock_guard l(cell.logMutex);
+    EXPECT_TRUE(std::any_of(cell.log.begin(), cell.log.end(), [](const std::string& line) {
+        return line.find("where the arm is is unknown") != std::string::npos &&
+               line.find("ActualFlangePose") != std::string::npos;
+    }));
 }

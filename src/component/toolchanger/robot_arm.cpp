@@ -25,6 +25,7 @@ RobotArm::RobotArm(const skill::detector::DetectedSkill& moveSkill,
         if (r.nodeId.serverIndex != 0 || r.browseName.namespaceIndex != robotics) continue;
         if (r.browseName.name == "SetTool") setTool_ = r.nodeId.nodeId;
         if (r.browseName.name == "ClearTool") clearTool_ = r.nodeId.nodeId;
+        if (r.browseName.name == "ActualFlangePose") flangePose_ = r.nodeId.nodeId;
     }
     if (setTool_.isNull() || clearTool_.isNull())
         throw std::runtime_error("the robot " + name_ + " at " + url_ +
@@ -82,6 +83,31 @@ std::string RobotArm::clearTool(const std::string& name) {
         return "ClearTool(" + name + "): " + e.what();
     }
     return {};
+}
+
+std::optional<Eigen::Isometry3d> RobotArm::flangePose(std::string& error) {
+    if (flangePose_.isNull()) {
+        error = "the robot " + name_ + " offers no ActualFlangePose";
+        return std::nullopt;
+    }
+    try {
+        const ua::DataValue dv =
+            client_->readAttribute(flangePose_, ua::AttributeId::Value, timeout_);
+        if (!dv.statusOrGood().isGood()) {
+            error = "ActualFlangePose of " + name_ + ": " + dv.statusOrGood().toString();
+            return std::nullopt;
+        }
+        const auto* x = dv.value ? dv.value->scalar<ua::ExtensionObject>() : nullptr;
+        auto f = x ? ua::fromExtensionObject<ua::ThreeDFrame>(*x) : std::nullopt;
+        if (!f || !ua::spatial::finite(*f)) {
+            error = "ActualFlangePose of " + name_ + " is not a finite ThreeDFrame";
+            return std::nullopt;
+        }
+        return ua::spatial::toIsometry(*f);
+    } catch (const std::exception& e) {
+        error = "ActualFlangePose of " + name_ + ": " + e.what();
+        return std::nullopt;
+    }
 }
 
 }  // namespace pnp::component::toolchanger

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <chrono>
 #include <memory>
+#include <optional>
 #include <stop_token>
 #include <string>
 #include <vector>
@@ -43,12 +44,17 @@ class RobotArm {
     std::string setTool(const std::string& name, const Eigen::Isometry3d& flangeToTool);
     std::string clearTool(const std::string& name);  // "": deactivate the active tool
 
+    // The motion device's ActualFlangePose (a pnp extension of the Robotics model: the
+    // flange's actual pose in the world frame); nullopt with the reason in `error` when the
+    // robot has no such variable or its value is not Good (no link, no sample yet).
+    std::optional<Eigen::Isometry3d> flangePose(std::string& error);
+
   private:
     std::string url_;
     std::string name_;
     std::shared_ptr<ua::client::Client> client_;
     std::unique_ptr<skill::client::CartesianLinearMoveSkillClient> move_;
-    ua::NodeId controller_, setTool_, clearTool_;
+    ua::NodeId controller_, setTool_, clearTool_, flangePose_;
     std::chrono::milliseconds timeout_;
 };
 

@@ -1,5 +1,6 @@
 #include "component/toolchanger/tool_changer.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -58,9 +59,10 @@ bool samePose(const Isometry3d& a, const Isometry3d& b) {
 struct CurrentTool {
     int id = 0;
     std::string applicationUri;
-    std::string name;       // ApplicationName
-    std::string endpoint;   // the tool's server
-    std::string toolFrame;  // the name given to the robot's SetTool ("" = none set)
+    std::string name;                      // ApplicationName
+    std::string endpoint;                  // the tool's server
+    std::string toolFrame;                 // the name given to the robot's SetTool ("" = none set)
+    std::optional<Isometry3d> gripOffset;  // flange -> the tool's grip point, when known
 };
 
 // The tool a run attached or parked, for its FinalResultData (the MES records "the dock at
@@ -256,7 +258,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             if (!s.valid) return;
             if (s.reading.state == ChangerState::kTool) {
                 if (current.id != s.reading.toolId)
-                    current = CurrentTool{s.reading.toolId, {}, {}, {}, {}};
+                    current = CurrentTool{s.reading.toolId, {}, {}, {}, {}, {}};
             } else if (s.reading.state == ChangerState::kReady ||
                        s.reading.state == ChangerState::kNoTool) {
                 current = CurrentTool{};
@@ -285,6 +287,9 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         std::string prefix;                        // "Detach." / "Attach." within ChangeTool
         bool halted = false;
         ToolRecord tool;  // attached (attach) or parked (detach) so far
+        // What the flange carries now: nullopt = nothing; else flange -> the tool's lowest
+        // point (its grip point, or unknownToolLength below the flange when not known).
+        std::optional<Isometry3d> carried;
     };
 
     void beginPhase(Run& r, const std::string& name) {
@@ -313,6 +318,72 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         }
         return Stop{skill::SkillResult::Failed,
                     m.message + " (moving to " + formatPosition(target) + ")"};
+    }
+
+    // ---- travel height -------------------------------------------------------------------
+    Isometry3d unknownTool() const {
+        Isometry3d t = Isometry3d::Identity();
+        t.translation().z() = options.unknownToolLength;
+        return t;
+    }
+    // The lowest flange z at `flange`'s orientation that keeps what the flange carries (the
+    // flange itself, and the tool's grip point) at or above travelHeight.
+    double travelFlangeZ(const Run& r, const Isometry3d& flange) const {
+        double below = 0.0;  // how far the lowest point is below the flange
+        if (r.carried)
+            below =
+                std::max(0.0, flange.translation().z() - (flange * *r.carried).translation().z());
+        return options.travelHeight + below;
+    }
+
+    // To `target` (above a dock) from where the arm is: straight up to the travel height (or
+    // stay at the current height when it is higher), across at that height, then straight
+    // down — no line from elsewhere in the cell dips below the travel height. Without the
+    // robot's actual pose (no ActualFlangePose): one line, as before, and a log line.
+    std::optional<Stop> travelTo(Run& r, const Isometry3d& target) {
+        constexpr double kTolerance = 0.001;  // m
+        std::string error;
+        const std::optional<Isometry3d> here = r.arm->flangePose(error);
+        if (!here) {
+            options.log("straight to " + formatPosition(target) +
+                        ": where the arm is is unknown (" + error + ")");
+            return move(r, target, options.travelVelocity);
+        }
+        // Already at the dock's approach pose (e.g. a retry): the dock's own way.
+        if (samePose(*here, target)) return move(r, target, options.travelVelocity);
+        const double height = std::max({here->translation().z(), travelFlangeZ(r, *here),
+                                        travelFlangeZ(r, target), target.translation().z()});
+        Isometry3d up = *here;
+        up.translation().z() = height;
+        Isometry3d across = target;
+        across.translation().z() = height;
+        if (height - here->translation().z() > kTolerance)
+            if (auto s = move(r, up, options.travelVelocity)) return s;
+        const bool moved =
+            (across.translation() - up.translation()).norm() > kTolerance ||
+            Eigen::AngleAxisd(up.linear().transpose() * across.linear()).angle() > kTolerance;
+        if (moved)
+            if (auto s = move(r, across, options.travelVelocity)) return s;
+        if (height - target.translation().z() > kTolerance)
+            if (auto s = move(r, target, options.travelVelocity)) return s;
+        return std::nullopt;
+    }
+
+    // Straight up from `from` (where the last move left the flange) until what it carries is
+    // at the travel height; nothing when it is already.
+    std::optional<Stop> clearUp(Run& r, const Isometry3d& from) {
+        const double z = travelFlangeZ(r, from);
+        if (z <= from.translation().z()) return std::nullopt;
+        Isometry3d p = from;
+        p.translation().z() = z;
+        return move(r, p, options.travelVelocity);
+    }
+    // clearUp after a failure with a tool locked: what it could not do, appended.
+    std::string clearAfterFailure(Run& r, const Isometry3d& from) {
+        if (r.stop.stop_requested()) return {};
+        if (auto s = clearUp(r, from))
+            return "; could not move clear above the dock: " + s->message;
+        return {};
     }
 
     // Waits for the ADC to show what `pred` wants; the sample it ended on.
@@ -386,8 +457,9 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         }
         if (auto e = r.arm->clearTool(""); !e.empty()) return Stop{skill::SkillResult::Failed, e};
 
+        r.carried.reset();
         beginPhase(r, "Approach");
-        if (auto s = move(r, openAbove, options.travelVelocity)) return s;
+        if (auto s = travelTo(r, openAbove)) return s;
         if (auto s = move(r, open, options.dockVelocity)) {
             if (s->result == skill::SkillResult::Failed) s->message += recover(r, {openAbove});
             return s;
@@ -427,6 +499,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         }
         const int toolId = locked.reading.toolId;
         const auto lockedAt = Clock::now();
+        r.carried = unknownTool();
         beginPhase(r, "Leave");
         if (auto s = move(r, lockedAbove, options.dockVelocity)) return s;
         if (const AdcSample s = expect(r, isTool); !isTool(s) || s.reading.toolId != toolId) {
@@ -441,7 +514,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             // operator may have swapped the tool in it since).
             std::erase_if(docks, [&](const auto& d) { return samePose(d.second, dock); });
             docks[toolId] = dock;
-            current = CurrentTool{toolId, appUri, {}, {}, {}};
+            current = CurrentTool{toolId, appUri, {}, {}, {}, {}};
         }
         r.tool = ToolRecord{toolId, appUri, {}, {}, dock};
         publishTool();
@@ -458,17 +531,19 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             return Stop{skill::SkillResult::Aborted, "halted"};
         }
         if (!error.empty())
-            return Stop{skill::SkillResult::Failed,
-                        "tool " + std::to_string(toolId) + " locked, but " + error};
+            return Stop{skill::SkillResult::Failed, "tool " + std::to_string(toolId) +
+                                                        " locked, but " + error +
+                                                        clearAfterFailure(r, lockedAbove)};
         if (toolSkills.empty())
-            return Stop{skill::SkillResult::Failed,
-                        appUri.empty()
-                            ? "tool " + std::to_string(toolId) +
-                                  " locked but no tool server appeared within " +
-                                  std::to_string(options.toolDetectTimeout.count()) + " ms"
-                            : "tool " + std::to_string(toolId) + " is locked, but no server " +
-                                  appUri + " with skills was detected within " +
-                                  std::to_string(options.toolDetectTimeout.count()) + " ms"};
+            return Stop{
+                skill::SkillResult::Failed,
+                (appUri.empty() ? "tool " + std::to_string(toolId) +
+                                      " locked but no tool server appeared within " +
+                                      std::to_string(options.toolDetectTimeout.count()) + " ms"
+                                : "tool " + std::to_string(toolId) + " is locked, but no server " +
+                                      appUri + " with skills was detected within " +
+                                      std::to_string(options.toolDetectTimeout.count()) + " ms") +
+                    clearAfterFailure(r, lockedAbove)};
         const double detectedAfterLock =
             std::chrono::duration<double>(Clock::now() - lockedAt).count();
         endPhase(r);
@@ -478,7 +553,19 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         std::string frameName =
             first.componentName.empty() ? "tool-" + std::to_string(toolId) : first.componentName;
         std::string note;
-        if (auto offset = gripOffset(toolSkills)) {
+        const std::optional<Isometry3d> offset = gripOffset(toolSkills);
+        if (offset) r.carried = *offset;
+        {
+            std::lock_guard l(mutex);
+            current =
+                CurrentTool{toolId, toolUri, first.componentName, first.endpointUrl, {}, offset};
+        }
+        // Up until the tool's grip point is at the travel height, still in flange targets
+        // (before SetTool makes the tool frame the robot's active one).
+        beginPhase(r, "Clear");
+        if (auto s = clearUp(r, lockedAbove)) return s;
+        endPhase(r);
+        if (offset) {
             if (auto e = r.arm->setTool(frameName, *offset); !e.empty())
                 return Stop{skill::SkillResult::Failed,
                             "tool " + std::to_string(toolId) + " attached, but " + e};
@@ -488,8 +575,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         }
         {
             std::lock_guard l(mutex);
-            current =
-                CurrentTool{toolId, toolUri, first.componentName, first.endpointUrl, frameName};
+            current.toolFrame = frameName;
         }
         publishTool();
         // When its skills appeared (the detector's event), from the changer's "tool N": the
@@ -648,9 +734,14 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
                                           : ToolRecord{toolId, {}, {}, {}, dock};
         }
         if (auto e = r.arm->clearTool(""); !e.empty()) return Stop{skill::SkillResult::Failed, e};
+        {
+            std::lock_guard l(mutex);
+            r.carried =
+                current.id == toolId && current.gripOffset ? *current.gripOffset : unknownTool();
+        }
 
         beginPhase(r, "Approach");
-        if (auto s = move(r, lockedAbove, options.travelVelocity)) return s;
+        if (auto s = travelTo(r, lockedAbove)) return s;
         if (auto s = move(r, dock, options.dockVelocity)) {
             if (s->result == skill::SkillResult::Failed) s->message += recover(r, {lockedAbove});
             return s;
@@ -671,6 +762,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             // Turn back (the tool stays locked on the flange) and leave.
             return Stop{skill::SkillResult::Failed, why + recover(r, {dock, lockedAbove})};
         }
+        r.carried.reset();  // the tool stays in the dock (checked below)
         beginPhase(r, "Leave");
         if (auto s = move(r, openAbove, options.dockVelocity)) return s;
         endPhase(r);

@@ -13,7 +13,10 @@
 //           the tool's grip point (IGripperType GripPoints/GripPoint_1); FinalResultData
 //           names the tool attached or parked (ToolAppUri, ToolName, ToolEndpoint, ToolId,
 //           ToolPosition)
+//           and the arm goes straight up until the tool's grip point is at travelHeight
 //   detach: LIN D↑, LIN D (tool N), LIN O (turn: ready), LIN O↑; then ClearTool
+// Each approach (to O↑ or D↑) starts from where the arm is (the robot's ActualFlangePose):
+// straight up to travelHeight (for what the flange carries), across at that height, down.
 // A failed check ends the run Failed with the reason, after moving the robot back clear of
 // the dock (turning the ring back first when it turned). Halt halts the robot's move and
 // leaves the changer where it is; the Condition variable, the skill's FinalResultData/Message
@@ -73,6 +76,15 @@ struct ToolChangerOptions {
     double liftHeight = 0.10;                          // m above the dock, along world z
     std::vector<double> travelVelocity = {0.25, 1.0};  // m/s, rad/s: to and from above the dock
     std::vector<double> dockVelocity = {0.05, 0.5};    // m/s, rad/s: down, turn, up at the dock
+    // The world z that the lowest point of what the flange carries (the attached tool's grip
+    // point, else the flange) stays above while the arm travels to or from a dock: docks may
+    // be beyond a table's edge with the tools hanging below its top. Approach: up from where
+    // the arm is (ActualFlangePose) to this height, across, then down to above the dock;
+    // after an attach: straight up until the tool's grip point is this high ("Clear").
+    double travelHeight = 0.10;  // m
+    // The grip point assumed for a tool whose own is not known (not attached by this
+    // component, or without IGripperType grip point): this far below the flange.
+    double unknownToolLength = 0.25;  // m
 
     std::chrono::milliseconds moveTimeout{30000};  // per robot move
     // After a move, for the ADC to show the expected state (its poll, the subscription).

@@ -82,6 +82,7 @@ struct RobotDevice::Impl {
     NodeId system, device, controllerNode, safety, worldToBase;
     std::array<NodeId, kinematics::kAxes> position{}, speed{}, acceleration{};
     NodeId emergencyStop, protectiveStop, inControl, streamTarget, setTool, clearTool;
+    NodeId flangePose;  // ActualFlangePose (pnp extension)
     std::unique_ptr<skill::server::SkillController> skills;
     std::shared_ptr<detail::PositionStreamSkill> stream;
 
@@ -187,6 +188,22 @@ void RobotDevice::Impl::build() {
                                       QualifiedName(rob, "InControl"), a);
     }
     buildAxes(child(device, {{rob, "Axes"}}), rob, di);
+    {
+        // Not in OPC 40010 (it has no pose of the arm): the flange's pose in the world frame
+        // from the actual joints, so that a client can plan its way from where the arm is.
+        const std::string base =
+            device.idType() == ua::IdType::String ? device.string() : options.name;
+        ua::server::VariableAttributes a;
+        a.dataType = NodeId(0, ns0::ThreeDFrame);
+        a.value = ua::DataValue(Variant(ua::toExtensionObject(ua::ThreeDFrame{})));
+        a.value.status = status::UncertainInitialValue;
+        a.description = ua::LocalizedText(
+            "",
+            "The flange's actual pose in the world frame (x, y, z in m; a, b, c in rad about "
+            "fixed X, Y, Z), from the actual joint positions and WorldToRobotBase.");
+        flangePose = space.addVariable(device, NodeId(own, base + ".ActualFlangePose"),
+                                       QualifiedName(skr, "ActualFlangePose"), a);
+    }
 
     controllerNode = space.instantiate(controllers, NodeId(rob, rid::ControllerType),
                                        NodeId(own, name + "Controller"),
@@ -369,7 +386,7 @@ void RobotDevice::Impl::publish() {
         const auto k = static_cast<std::size_t>(i);
         nodes.insert(nodes.end(), {position[k], speed[k], acceleration[k]});
     }
-    nodes.insert(nodes.end(), {emergencyStop, protectiveStop, inControl});
+    nodes.insert(nodes.end(), {emergencyStop, protectiveStop, inControl, flangePose});
     ua::server::AddressSpace::VariableGroup group(nodes);
     auto& space = server.addressSpace();
     std::uint64_t lastSequence = 0;
@@ -416,6 +433,10 @@ void RobotDevice::Impl::publish() {
         values.emplace_back(n, dv(Variant(s->safety == rb::SafetyState::kEmergencyStop)));
         values.emplace_back(n + 1, dv(Variant(s->safety == rb::SafetyState::kProtectiveStop)));
         values.emplace_back(n + 2, dv(Variant(connected && s->following)));
+        const Eigen::Isometry3d flange = context->plan(
+            [&](const rb::Planner& p) { return p.toolPose(s->q, Eigen::Isometry3d::Identity()); });
+        values.emplace_back(n + 3,
+                            dv(Variant(ua::toExtensionObject(ua::spatial::toFrame(flange)))));
         space.setValues(group, std::move(values));
     }
 }
