@@ -196,7 +196,8 @@ class PickPlaceCell : public ::testing::Test {
         }
     }
     Eigen3 position(const std::string& node) {
-        const auto v = value(node);
+        auto v = value(node);
+        if (v.contains("Body")) v = v.at("Body");  // the ThreeDFrame structure as JSON
         if (!v.contains("CartesianCoordinates")) return {NAN, NAN, NAN};
         const auto c = v.at("CartesianCoordinates");
         return {c.at("X").get<double>(), c.at("Y").get<double>(), c.at("Z").get<double>()};
