@@ -218,4 +218,19 @@ std::function<int()> addDeviceCommands(CLI::App& app) {
     };
 }
 
+std::unique_ptr<mdns::Mdns> componentMdns(bool noMdns, const ServeOptions& serve,
+                                          const std::string& who) {
+    if (noMdns) return nullptr;
+    try {
+        auto m = std::make_unique<mdns::Mdns>(
+            mdnsConfig(serve.discovery.mdnsInterfaces, serve.discovery.mdnsPort, 120));
+        m->start();
+        return m;
+    } catch (const std::exception& e) {
+        std::cerr << who << ": no mDNS (" << e.what() << "); only --lds and the given URLs"
+                  << std::endl;
+        return nullptr;
+    }
+}
+
 }  // namespace pnp::cli

@@ -13,6 +13,7 @@
 
 #include "commands.hpp"
 #include "discovery_commands.hpp"
+#include "mdns/mdns.hpp"
 #include "output.hpp"
 #include "ua/server/server.hpp"
 
@@ -33,6 +34,12 @@ ua::server::ServerConfig serverConfig(const ServeOptions& serve);
 // "x,y,z,a,b,c": six finite numbers (m, rad about the fixed X, Y, Z axes); a UsageError
 // naming `option` otherwise.
 Eigen::Isometry3d parseFrame(const std::string& option, const std::string& text);
+
+// A component's own mDNS browser for its skill detector (the server's responder is
+// DiscoveryRuntime's): null with --no-mdns, or when mDNS cannot start (said on stderr as
+// "`who`: no mDNS (why); only --lds and the given URLs").
+std::unique_ptr<mdns::Mdns> componentMdns(bool noMdns, const ServeOptions& serve,
+                                          const std::string& who);
 
 // Waits for SIGINT / SIGTERM (blocked by blockStopSignals()) and says "`who`: SIGINT, stopping".
 void waitForStopSignal(const sigset_t& stopSignals, const std::string& who);

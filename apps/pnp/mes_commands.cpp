@@ -59,17 +59,7 @@ int runMes(MesCliOptions& o) {
         std::cerr << "error: " << e.what() << "\n";
         return kExitUsage;
     }
-    std::unique_ptr<mdns::Mdns> mdns;
-    if (!o.noMdns) {
-        try {
-            mdns = std::make_unique<mdns::Mdns>(
-                mdnsConfig(o.serve.discovery.mdnsInterfaces, o.serve.discovery.mdnsPort, 120));
-            mdns->start();
-        } catch (const std::exception& e) {
-            std::cerr << "pnp mes: no mDNS (" << e.what() << "); only --lds" << std::endl;
-            mdns.reset();
-        }
-    }
+    std::unique_ptr<mdns::Mdns> mdns = componentMdns(o.noMdns, o.serve, "pnp mes");
     mes::MesOptions mopt;
     mopt.name = o.componentName;
     mopt.recordFile = o.recordFile;

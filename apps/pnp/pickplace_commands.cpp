@@ -64,18 +64,7 @@ int runPickPlace(PickPlaceCliOptions& o) {
         return kExitUsage;
     }
     const sigset_t stopSignals = blockStopSignals();
-    std::unique_ptr<mdns::Mdns> mdns;
-    if (!o.noMdns) {
-        try {
-            mdns = std::make_unique<mdns::Mdns>(
-                mdnsConfig(o.serve.discovery.mdnsInterfaces, o.serve.discovery.mdnsPort, 120));
-            mdns->start();
-        } catch (const std::exception& e) {
-            std::cerr << "pnp component pick-place: no mDNS (" << e.what()
-                      << "); only --lds and the given endpoints" << std::endl;
-            mdns.reset();
-        }
-    }
+    std::unique_ptr<mdns::Mdns> mdns = componentMdns(o.noMdns, o.serve, "pnp component pick-place");
     component::pickplace::PickPlaceOptions popt;
     popt.name = o.componentName;
     popt.knowledge = knowledge;

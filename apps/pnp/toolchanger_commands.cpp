@@ -85,18 +85,8 @@ int runToolChanger(ToolChangerCliOptions& o) {
     const sigset_t stopSignals = blockStopSignals();
 
     // The detector's own mDNS browser (the server's responder is DiscoveryRuntime's).
-    std::unique_ptr<mdns::Mdns> mdns;
-    if (!o.noMdns) {
-        try {
-            mdns = std::make_unique<mdns::Mdns>(
-                mdnsConfig(o.serve.discovery.mdnsInterfaces, o.serve.discovery.mdnsPort, 120));
-            mdns->start();
-        } catch (const std::exception& e) {
-            std::cerr << "pnp component toolchanger: no mDNS (" << e.what()
-                      << "); only --lds and the given URLs" << std::endl;
-            mdns.reset();
-        }
-    }
+    std::unique_ptr<mdns::Mdns> mdns =
+        componentMdns(o.noMdns, o.serve, "pnp component toolchanger");
     component::toolchanger::ToolChangerOptions topt;
     topt.name = o.componentName;
     topt.robot = o.robot;
