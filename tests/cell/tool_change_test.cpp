@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "support/child_process.hpp"
+#include "support/shell.hpp"
 
 #ifndef PNP_BINARY
 #error "PNP_BINARY must be defined"
@@ -26,18 +27,10 @@ namespace {
 using namespace std::chrono_literals;
 using pnp::testing::ChildProcess;
 
-std::string tmpPath(const std::string& name) {
-    return ::testing::TempDir() + "pnp_toolchange_" + std::to_string(::getpid()) + "_" + name;
-}
+std::string tmpPath(const std::string& name) { return pnp::testing::tmpPath("toolchange", name); }
 
-// Runs a command (bounded by `timeout -k`), returns its exit status and stdout.
 int run(const std::string& command, std::string& out) {
-    FILE* p = ::popen(command.c_str(), "r");
-    if (p == nullptr) return -1;
-    char buf[4096];
-    while (std::fgets(buf, sizeof buf, p)) out += buf;
-    const int status = ::pclose(p);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return pnp::testing::runShell(command, out);
 }
 
 const std::string kPnp = PNP_BINARY;

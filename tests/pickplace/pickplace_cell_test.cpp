@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "support/child_process.hpp"
+#include "support/shell.hpp"
 
 #ifndef PNP_BINARY
 #error "PNP_BINARY must be defined"
@@ -32,18 +33,10 @@ const std::string kPnp = PNP_BINARY;
 const std::string kDock1 = "-0.125,0.513,-0.036,0,3.14159265358979,0";  // vacuum gripper
 const std::string kDock2 = "0.125,0.513,-0.036,0,3.14159265358979,0";   // parallel gripper
 
-std::string tmpPath(const std::string& name) {
-    return ::testing::TempDir() + "pnp_pickplace_" + std::to_string(::getpid()) + "_" + name;
-}
+std::string tmpPath(const std::string& name) { return pnp::testing::tmpPath("pickplace", name); }
 
-// Runs a command (bounded by `timeout -k`), returns its exit status and stdout.
 int run(const std::string& command, std::string& out) {
-    FILE* p = ::popen(command.c_str(), "r");
-    if (p == nullptr) return -1;
-    char buf[4096];
-    while (std::fgets(buf, sizeof buf, p)) out += buf;
-    const int status = ::pclose(p);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return pnp::testing::runShell(command, out);
 }
 
 struct Cell {
