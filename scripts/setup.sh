@@ -51,8 +51,8 @@ PACKAGES=(
     libroscpp-dev libstd-msgs-dev python3-rosmaster
     stress-ng iperf3 gnuplot-nox
     # the knowledge base (src/kb, docs/knowledge-base.md): Turtle parsing (serd), the SPARQL
-    # endpoint client (cpp-httplib), and Virtuoso, the real SPARQL server tests/kb runs against
-    libserd-dev libcpp-httplib-dev virtuoso-opensource
+    # endpoint client (libcurl), and Virtuoso, the real SPARQL server tests/kb runs against
+    libserd-dev libcurl4-openssl-dev virtuoso-opensource
 )
 
 # Node.js: the machine image ships nodesource's nodejs (which bundles npm and

@@ -1,6 +1,9 @@
 #include "kb/endpoint.hpp"
 
-#include <httplib.h>
+#include <curl/curl.h>
+
+#include <memory>
+#include <mutex>
 
 #include <charconv>
 #include <nlohmann/json.hpp>
@@ -159,50 +162,64 @@ class EndpointKnowledgeBase final : public KnowledgeBase {
     }
 
     // POSTs `field`=`text` (SPARQL 1.1 Protocol, form-encoded); returns the response body.
+    // libcurl: its global set-up (OpenSSL's included) runs on the first request only, so a
+    // process that never talks to an endpoint pays nothing for it at start-up.
     std::string post(const char* field, std::string_view text, const char* accept,
                      Deadline deadline) {
-        auto remaining = std::chrono::duration_cast<std::chrono::microseconds>(
+        const auto remaining = std::chrono::duration_cast<std::chrono::milliseconds>(
             deadline - std::chrono::steady_clock::now());
         if (remaining.count() <= 0) throw KbError(url_ + ": deadline exceeded");
-        httplib::Client client(host_, port_);
-        client.set_connection_timeout(remaining);
-        client.set_read_timeout(remaining);
-        client.set_write_timeout(remaining);
-        httplib::Request req;
-        req.method = "POST";
-        req.path = path_;
-        req.headers = {{"Accept", accept}};
-        req.set_header("Content-Type", "application/x-www-form-urlencoded");
-        req.body =
-            std::string(field) + "=" + httplib::detail::encode_query_param(std::string(text));
-        std::string body;
-        bool tooLarge = false;
-        req.content_receiver = [&](const char* data, std::size_t n, std::uint64_t, std::uint64_t) {
-            if (body.size() + n > kMaxEndpointResponseBytes) {
-                tooLarge = true;
-                return false;
+        static std::once_flag once;
+        std::call_once(once, [] { curl_global_init(CURL_GLOBAL_DEFAULT); });
+        std::unique_ptr<CURL, decltype(&curl_easy_cleanup)> h(curl_easy_init(), curl_easy_cleanup);
+        if (!h) throw KbError(url_ + ": cannot create an HTTP request");
+        std::unique_ptr<char, decltype(&curl_free)> escaped(
+            curl_easy_escape(h.get(), text.data(), static_cast<int>(text.size())), curl_free);
+        if (!escaped) throw KbError(url_ + ": cannot encode the request");
+        const std::string form = std::string(field) + "=" + escaped.get();
+        std::unique_ptr<curl_slist, decltype(&curl_slist_free_all)> headers(nullptr,
+                                                                           curl_slist_free_all);
+        for (const std::string& line :
+             {std::string("Accept: ") + accept,
+              std::string("Content-Type: application/x-www-form-urlencoded")})
+            headers.reset(curl_slist_append(headers.release(), line.c_str()));
+        struct Sink {
+            std::string body;
+            bool tooLarge = false;
+        } sink;
+        auto write = +[](char* data, std::size_t size, std::size_t n, void* user) -> std::size_t {
+            auto* s = static_cast<Sink*>(user);
+            if (s->body.size() + size * n > kMaxEndpointResponseBytes) {
+                s->tooLarge = true;
+                return 0;  // aborts the transfer
             }
-            body.append(data, n);
-            return true;
+            s->body.append(data, size * n);
+            return size * n;
         };
-        httplib::Response res;
-        httplib::Error error = httplib::Error::Success;
-        bool ok = client.send(req, res, error);
-        if (tooLarge) {
+        CURL* c = h.get();
+        curl_easy_setopt(c, CURLOPT_URL, url_.c_str());
+        curl_easy_setopt(c, CURLOPT_PROTOCOLS_STR, "http");
+        curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
+        curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers.get());
+        curl_easy_setopt(c, CURLOPT_POSTFIELDS, form.c_str());
+        curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE_LARGE, static_cast<curl_off_t>(form.size()));
+        curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, static_cast<long>(remaining.count()));
+        curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(remaining.count()));
+        curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, write);
+        curl_easy_setopt(c, CURLOPT_WRITEDATA, &sink);
+        const CURLcode rc = curl_easy_perform(c);
+        if (sink.tooLarge) {
             throw KbError(url_ + ": answer larger than " +
                           std::to_string(kMaxEndpointResponseBytes) + " bytes");
         }
-        if (!ok) {
-            std::string why = httplib::to_string(error);
-            if (error == httplib::Error::Read && std::chrono::steady_clock::now() >= deadline) {
-                why = "deadline exceeded";
-            }
-            throw KbError(url_ + ": " + why);
+        if (rc == CURLE_OPERATION_TIMEDOUT) throw KbError(url_ + ": deadline exceeded");
+        if (rc != CURLE_OK) throw KbError(url_ + ": " + curl_easy_strerror(rc));
+        long status = 0;
+        curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &status);
+        if (status < 200 || status >= 300) {
+            throw KbError(url_ + ": HTTP " + std::to_string(status) + ": " + truncated(sink.body));
         }
-        if (res.status < 200 || res.status >= 300) {
-            throw KbError(url_ + ": HTTP " + std::to_string(res.status) + ": " + truncated(body));
-        }
-        return body;
+        return std::move(sink.body);
     }
 
     std::string url_, host_;

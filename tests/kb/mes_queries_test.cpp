@@ -5,6 +5,8 @@
 // behaves as the default.
 #include <gtest/gtest.h>
 
+#include <filesystem>
+
 #include "kb_suite.hpp"
 #include "mes/process.hpp"
 
@@ -12,6 +14,21 @@ namespace pnp::kb::test {
 
 TEST(MesQueries, TheRepositorysKnowledgeAndTheThesisProcess) {
     mes::SharedKb kb(openBackend(PNP_KB_BACKEND));
+    // The Virtuoso store is shared by the suite: leave none of our graphs behind.
+    struct Clear {
+        mes::SharedKb& kb;
+        ~Clear() {
+            try {
+                kb.update("CLEAR GRAPH <urn:pnp:kb:skill-types>", soon());
+                for (const auto& f : mes::defaultKnowledgeFiles())
+                    kb.update("CLEAR GRAPH <file://" +
+                                  std::filesystem::absolute(f).lexically_normal().string() + ">",
+                              soon());
+            } catch (const std::exception& e) {
+                ADD_FAILURE() << "clearing the graphs: " << e.what();
+            }
+        }
+    } clear{kb};
     mes::loadKnowledge(kb, mes::defaultKnowledgeFiles(), soon(std::chrono::seconds(60)));
     const auto p = mes::loadProcess(kb, "urn:pnp:kb:process#thesis", soon());
     ASSERT_EQ(p.steps.size(), 9u);
