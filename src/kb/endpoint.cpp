@@ -1,12 +1,13 @@
 #include "kb/endpoint.hpp"
 
 #include <curl/curl.h>
-
-#include <memory>
-#include <mutex>
+#include <dlfcn.h>
 
 #include <charconv>
+#include <memory>
+#include <mutex>
 #include <nlohmann/json.hpp>
+#include <type_traits>
 
 #include "kb/sparql.hpp"
 #include "kb/store.hpp"
@@ -24,6 +25,52 @@ std::string truncated(std::string s) {
     while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
     return s;
 }
+
+// libcurl, loaded when the first endpoint is opened: linked into every pnp process it would
+// map ~30 libraries (TLS, Kerberos, LDAP, ...) at each start — tens of ms of every device's
+// plug-in time — for the few processes that use `--kb http://`. (Debian's cpp-httplib is no
+// better: it initialises OpenSSL, config file included, in every process that links it.)
+struct Curl {
+    CURLcode (*global_init)(long) = nullptr;
+    CURL* (*easy_init)() = nullptr;
+    void (*easy_cleanup)(CURL*) = nullptr;
+    CURLcode (*easy_setopt)(CURL*, CURLoption, ...) = nullptr;
+    CURLcode (*easy_perform)(CURL*) = nullptr;
+    CURLcode (*easy_getinfo)(CURL*, CURLINFO, ...) = nullptr;
+    const char* (*easy_strerror)(CURLcode) = nullptr;
+    char* (*easy_escape)(CURL*, const char*, int) = nullptr;
+    void (*free)(void*) = nullptr;
+    curl_slist* (*slist_append)(curl_slist*, const char*) = nullptr;
+    void (*slist_free_all)(curl_slist*) = nullptr;
+
+    // Throws KbError when libcurl is not installed (Debian: libcurl4).
+    static const Curl& get() {
+        static const Curl curl = load();
+        if (!curl.easy_init)
+            throw KbError("the SPARQL endpoint client needs libcurl.so.4 (Debian: libcurl4)");
+        return curl;
+    }
+
+  private:
+    static Curl load() {
+        Curl c;
+        void* lib = ::dlopen("libcurl.so.4", RTLD_NOW | RTLD_LOCAL);
+        if (lib == nullptr) return c;
+        auto sym = [&](auto& f, const char* name) {
+            f = reinterpret_cast<std::remove_reference_t<decltype(f)>>(::dlsym(lib, name));
+            return f != nullptr;
+        };
+        const bool all =
+            sym(c.global_init, "curl_global_init") && sym(c.easy_init, "curl_easy_init") &&
+            sym(c.easy_cleanup, "curl_easy_cleanup") && sym(c.easy_setopt, "curl_easy_setopt") &&
+            sym(c.easy_perform, "curl_easy_perform") && sym(c.easy_getinfo, "curl_easy_getinfo") &&
+            sym(c.easy_strerror, "curl_easy_strerror") && sym(c.easy_escape, "curl_easy_escape") &&
+            sym(c.free, "curl_free") && sym(c.slist_append, "curl_slist_append") &&
+            sym(c.slist_free_all, "curl_slist_free_all");
+        if (!all || c.global_init(CURL_GLOBAL_DEFAULT) != CURLE_OK) return Curl{};
+        return c;  // the library stays loaded for the life of the process
+    }
+};
 
 class EndpointKnowledgeBase final : public KnowledgeBase {
   public:
@@ -162,27 +209,23 @@ class EndpointKnowledgeBase final : public KnowledgeBase {
     }
 
     // POSTs `field`=`text` (SPARQL 1.1 Protocol, form-encoded); returns the response body.
-    // libcurl: its global set-up (OpenSSL's included) runs on the first request only, so a
-    // process that never talks to an endpoint pays nothing for it at start-up.
     std::string post(const char* field, std::string_view text, const char* accept,
                      Deadline deadline) {
         const auto remaining = std::chrono::duration_cast<std::chrono::milliseconds>(
             deadline - std::chrono::steady_clock::now());
         if (remaining.count() <= 0) throw KbError(url_ + ": deadline exceeded");
-        static std::once_flag once;
-        std::call_once(once, [] { curl_global_init(CURL_GLOBAL_DEFAULT); });
-        std::unique_ptr<CURL, decltype(&curl_easy_cleanup)> h(curl_easy_init(), curl_easy_cleanup);
+        const Curl& curl = Curl::get();
+        std::unique_ptr<CURL, void (*)(CURL*)> h(curl.easy_init(), curl.easy_cleanup);
         if (!h) throw KbError(url_ + ": cannot create an HTTP request");
-        std::unique_ptr<char, decltype(&curl_free)> escaped(
-            curl_easy_escape(h.get(), text.data(), static_cast<int>(text.size())), curl_free);
+        std::unique_ptr<char, void (*)(void*)> escaped(
+            curl.easy_escape(h.get(), text.data(), static_cast<int>(text.size())), curl.free);
         if (!escaped) throw KbError(url_ + ": cannot encode the request");
         const std::string form = std::string(field) + "=" + escaped.get();
-        std::unique_ptr<curl_slist, decltype(&curl_slist_free_all)> headers(nullptr,
-                                                                           curl_slist_free_all);
+        std::unique_ptr<curl_slist, void (*)(curl_slist*)> headers(nullptr, curl.slist_free_all);
         for (const std::string& line :
              {std::string("Accept: ") + accept,
               std::string("Content-Type: application/x-www-form-urlencoded")})
-            headers.reset(curl_slist_append(headers.release(), line.c_str()));
+            headers.reset(curl.slist_append(headers.release(), line.c_str()));
         struct Sink {
             std::string body;
             bool tooLarge = false;
@@ -197,25 +240,25 @@ class EndpointKnowledgeBase final : public KnowledgeBase {
             return size * n;
         };
         CURL* c = h.get();
-        curl_easy_setopt(c, CURLOPT_URL, url_.c_str());
-        curl_easy_setopt(c, CURLOPT_PROTOCOLS_STR, "http");
-        curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
-        curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers.get());
-        curl_easy_setopt(c, CURLOPT_POSTFIELDS, form.c_str());
-        curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE_LARGE, static_cast<curl_off_t>(form.size()));
-        curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, static_cast<long>(remaining.count()));
-        curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(remaining.count()));
-        curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, write);
-        curl_easy_setopt(c, CURLOPT_WRITEDATA, &sink);
-        const CURLcode rc = curl_easy_perform(c);
+        curl.easy_setopt(c, CURLOPT_URL, url_.c_str());
+        curl.easy_setopt(c, CURLOPT_PROTOCOLS_STR, "http");
+        curl.easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
+        curl.easy_setopt(c, CURLOPT_HTTPHEADER, headers.get());
+        curl.easy_setopt(c, CURLOPT_POSTFIELDS, form.c_str());
+        curl.easy_setopt(c, CURLOPT_POSTFIELDSIZE_LARGE, static_cast<curl_off_t>(form.size()));
+        curl.easy_setopt(c, CURLOPT_TIMEOUT_MS, static_cast<long>(remaining.count()));
+        curl.easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(remaining.count()));
+        curl.easy_setopt(c, CURLOPT_WRITEFUNCTION, write);
+        curl.easy_setopt(c, CURLOPT_WRITEDATA, &sink);
+        const CURLcode rc = curl.easy_perform(c);
         if (sink.tooLarge) {
             throw KbError(url_ + ": answer larger than " +
                           std::to_string(kMaxEndpointResponseBytes) + " bytes");
         }
         if (rc == CURLE_OPERATION_TIMEDOUT) throw KbError(url_ + ": deadline exceeded");
-        if (rc != CURLE_OK) throw KbError(url_ + ": " + curl_easy_strerror(rc));
+        if (rc != CURLE_OK) throw KbError(url_ + ": " + curl.easy_strerror(rc));
         long status = 0;
-        curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &status);
+        curl.easy_getinfo(c, CURLINFO_RESPONSE_CODE, &status);
         if (status < 200 || status >= 300) {
             throw KbError(url_ + ": HTTP " + std::to_string(status) + ": " + truncated(sink.body));
         }
