@@ -20,7 +20,7 @@ namespace {
 struct CellCliOptions {
     cell::CellOptions cell;
     std::string pnp, cellFile, logDir, reportFile = "cell-report.json";
-    std::vector<std::string> kbFiles;
+    std::vector<std::string> kbFiles, extraKbFiles;
     int ldsPollMs = 5;
     int startTimeoutMs = 30000;
     int processTimeoutMs = 150000;
@@ -53,6 +53,7 @@ int runCellCommand(CellCliOptions& o, bool up) {
     c.logDir = o.logDir;
     c.reportFile = o.reportFile;
     for (const auto& f : o.kbFiles) c.kbFiles.emplace_back(f);
+    for (const auto& f : o.extraKbFiles) c.extraKbFiles.emplace_back(f);
     c.ldsPoll = std::chrono::milliseconds(o.ldsPollMs);
     c.startTimeout = std::chrono::milliseconds(o.startTimeoutMs);
     c.processTimeout = std::chrono::milliseconds(o.processTimeoutMs);
@@ -66,6 +67,9 @@ void addCommonOptions(CLI::App* cmd, CellCliOptions& o) {
     cmd->add_option("--kb-file", o.kbFiles,
                     "Turtle file for the MES and Pick-and-Place (repeatable; default: every "
                     "models/kb/*.ttl)");
+    cmd->add_option("--add-kb-file", o.extraKbFiles,
+                    "a Turtle file loaded after those (repeatable): e.g. a process of your own "
+                    "next to the default files");
     cmd->add_option("--kb", o.cell.kb,
                     "their knowledge base: a SPARQL 1.1 endpoint URL (default: embedded)");
     cmd->add_option("--log-dir", o.logDir, "every child's log here (default /tmp/pnp-cell-<pid>)");
@@ -130,6 +134,21 @@ std::function<int()> addCellCommands(CLI::App& app) {
         "start the same cell and leave it running: prints every server's URL; Ctrl-C stops "
         "everything it started");
     addCommonOptions(up, *upOpts);
+    up->footer(
+        "Once everything is up it prints ONE JSON line on stdout (then the URLs as text):\n"
+        "  {\"pid\": runner, \"logDir\": DIR, \"lds\": URL, \"mes\": URL, \"world\": URL (the "
+        "simulator's ground truth), \"sim\": {the simulator's own line}, \"problems\": [...],\n"
+        "   \"children\": [{\"name\": \"pick-place\", \"pid\": N, \"url\": URL, \"log\": FILE, "
+        "\"argv\": [...]}, ...]}\n"
+        "in start order (lds, mes, sim, ur, kelvin-adc, robotiq, ecbpi, wsg, toolchanger, "
+        "pick-place); a tool adapter's url (\"servedWhilePowered\": true) is served only while "
+        "its tool is locked on the flange. A child may be killed by its PID and started again "
+        "with its argv (the same ports for the tools' adapters; a server with --port 0 gets a "
+        "new one and registers with the LDS-ME again): a child that exits is a warning on "
+        "stderr, the rest keeps running. A process of your own: --add-kb-file "
+        "F.ttl (next to models/kb/*.ttl), then `pnp mes run IRI --mes URL`.\n"
+        "Exit codes: 0 stopped by SIGINT / SIGTERM once up; 1 the cell did not come up; 130 "
+        "stopped while starting.");
 
     return [run, up, runOpts, upOpts]() -> int {
         if (*run) return runCellCommand(*runOpts, false);

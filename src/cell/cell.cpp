@@ -147,6 +147,7 @@ struct Cell::Impl {
     std::string mdnsPort;
     json sim;                                               // the sim's JSON line
     std::vector<std::pair<std::string, std::string>> urls;  // child -> URL
+    std::map<std::string, std::string> childUrls;           // child -> its server's URL
     std::map<std::string, std::string> appUris;             // child -> ApplicationUri
     std::vector<Detection> detections;
     std::vector<std::string> problems;  // what did not come up
@@ -274,6 +275,7 @@ struct Cell::Impl {
         d.endpointUrl = line.text.substr(13);
         d.listeningMs = msSince(child.startTime(), line.time);
         urls.emplace_back(name, d.endpointUrl);
+        childUrls[name] = d.endpointUrl;
         appUris[name] = appUri;
         deviceIndex[d.endpointUrl] = name;
         deviceIndex[appUri] = name;
@@ -409,6 +411,8 @@ struct Cell::Impl {
                 if (e.path().extension() == ".ttl") options.kbFiles.push_back(e.path());
             std::sort(options.kbFiles.begin(), options.kbFiles.end());
         }
+        options.kbFiles.insert(options.kbFiles.end(), options.extraKbFiles.begin(),
+                               options.extraKbFiles.end());
         auto loaded = world::loadCellFile(options.cellFile);
         if (!loaded) throw CellError(loaded.error().message);
         description = std::move(*loaded);
@@ -429,6 +433,7 @@ struct Cell::Impl {
         auto& ldsChild = spawn("lds", serverArgs({"lds", "--port", "0"}, "lds", false));
         lds = waitLine(ldsChild, "listening on ").text.substr(13);
         urls.emplace_back("lds", lds);
+        childUrls["lds"] = lds;
         say("LDS-ME " + lds);
 
         detector::DetectorConfig dc;
@@ -467,6 +472,7 @@ struct Cell::Impl {
             throw CellError("sim: unexpected first line: " + simLine.text);
         worldUrl = sim.at("world").get<std::string>();
         urls.emplace_back("sim (ground truth)", worldUrl);
+        childUrls["sim"] = worldUrl;
         world.connect(worldUrl, Clock::now() + options.startTimeout);
         say("simulator: cell " + sim.value("cell", std::string()) + ", ground truth " + worldUrl);
         powerWatch = std::jthread([this](std::stop_token st) { watchPower(st); });
@@ -528,6 +534,7 @@ struct Cell::Impl {
             const std::string endpoint =
                 info.is_object() ? info.value("endpointUrl", std::string()) : std::string();
             urls.emplace_back(name + " (served while powered)", endpoint);
+            childUrls[name] = endpoint;
             appUris[name] = uri;
             deviceIndex[uri] = name;
             if (!endpoint.empty()) deviceIndex[endpoint] = name;
@@ -702,6 +709,45 @@ std::vector<std::string> Cell::exitedUnexpectedly() {
 }
 std::vector<std::string> Cell::problems() const { return impl_->problems; }
 
+std::vector<ChildInfo> Cell::children() const {
+    std::vector<ChildInfo> out;
+    for (const auto* c : impl_->supervisor.children()) {
+        ChildInfo i;
+        i.name = c->name();
+        i.pid = c->pid();
+        const auto url = impl_->childUrls.find(c->name());
+        if (url != impl_->childUrls.end()) i.url = url->second;
+        i.log = c->logFile().string();
+        i.argv = c->argv();
+        i.netns = impl_->netnsOf(c->name());
+        out.push_back(std::move(i));
+    }
+    return out;
+}
+
+json Cell::describe() const {
+    json children = json::array();
+    for (const auto& c : this->children()) {
+        json j = {{"name", c.name}, {"pid", c.pid}, {"log", c.log}, {"argv", c.argv}};
+        if (!c.url.empty()) j["url"] = c.url;
+        if (!c.netns.empty()) j["netns"] = c.netns;
+        // A tool's adapter serves only while its tool is powered (locked on the flange).
+        for (const auto& kind : kToolAdapters)
+            if (c.name == kind.name) j["servedWhilePowered"] = true;
+        children.push_back(std::move(j));
+    }
+    json out = {{"pid", ::getpid()},
+                {"logDir", impl_->supervisor.logDir().string()},
+                {"lds", impl_->lds},
+                {"world", impl_->worldUrl},
+                {"children", std::move(children)}};
+    if (!impl_->mes.empty()) out["mes"] = impl_->mes;
+    if (impl_->sim.is_object()) out["sim"] = impl_->sim;
+    json problems = impl_->problems;
+    out["problems"] = std::move(problems);
+    return out;
+}
+
 // ---- the commands ------------------------------------------------------------------------
 
 namespace {
@@ -773,16 +819,22 @@ int upCell(const CellOptions& options, std::stop_token stop) {
         return stop.stop_requested() ? 130 : 1;
     }
     for (const auto& x : cell.problems()) std::cerr << "warning: " << x << "\n";
+    // One JSON line first (README.md "pnp cell up"): what a script or test needs to reach
+    // every process, stop it by PID and start it again with the same argv.
+    std::cout << cell.describe().dump(-1, ' ', false, json::error_handler_t::replace) << "\n";
     std::cout << "The cell is up (logs in " << cell.logDir().string() << "):\n";
     for (const auto& [name, url] : cell.urls()) std::cout << "  " << name << "  " << url << "\n";
     std::cout << "Try: pnp skills --once --no-mdns --lds " << cell.urls().front().second
               << "\nCtrl-C stops everything." << std::endl;
+    // A process that exits (a crash, or a test that kills it to see the cell cope) is
+    // reported once and the rest keeps running: it can be started again with its argv.
+    std::set<std::string> reported;
     while (!stop.stop_requested()) {
         std::this_thread::sleep_for(100ms);
-        for (const auto& x : cell.exitedUnexpectedly()) {
-            std::cerr << "error: exited on its own: " << x << "; stopping the cell\n";
-            return 1;
-        }
+        for (const auto& x : cell.exitedUnexpectedly())
+            if (reported.insert(x).second)
+                std::cerr << "warning: exited: " << x << "; the rest of the cell keeps running"
+                          << std::endl;
     }
     std::cout << "[cell] stopping" << std::endl;
     return 0;

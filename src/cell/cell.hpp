@@ -16,6 +16,7 @@
 #include <chrono>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <stop_token>
 #include <string>
@@ -31,12 +32,24 @@ class CellError : public std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
+// One process the runner started: enough to stop it by PID and start it again the same way.
+struct ChildInfo {
+    std::string name;  // lds, mes, sim, ur, kelvin-adc, robotiq, ecbpi, wsg, toolchanger, ...
+    int pid = -1;
+    std::string url;  // its server ("" = none); the simulator's: the ground truth
+    std::string log;  // its stderr (stdout in <log>.out)
+    std::vector<std::string> argv;
+    std::string netns;  // --netns: the network namespace it runs in (/var/run/netns/NAME)
+};
+
 struct CellOptions {
     std::filesystem::path pnp;       // the children's executable (default: this one)
     std::filesystem::path cellFile;  // default: models/cells/thesis.yaml
     // Turtle files given to the MES and the Pick-and-Place component (--kb-file); default:
     // every models/kb/*.ttl, sorted.
     std::vector<std::filesystem::path> kbFiles;
+    // Loaded after those (--add-kb-file): e.g. a test's own process next to the default files.
+    std::vector<std::filesystem::path> extraKbFiles;
     std::string kb;  // --kb LOCATION for both ("" = their default, the embedded store)
     std::string processIri = "urn:pnp:kb:process#thesis";
     std::filesystem::path logDir;  // default /tmp/pnp-cell-<pid>
@@ -83,6 +96,11 @@ class Cell {
     std::vector<std::string> exitedUnexpectedly();
     // What did not come up at start (the MES or Pick-and-Place: the rest still runs).
     std::vector<std::string> problems() const;
+    // Every process the runner started, in start order.
+    std::vector<ChildInfo> children() const;
+    // The line `pnp cell up` prints (README.md): the URLs, and per child its PID, URL, log
+    // and argv.
+    nlohmann::json describe() const;
 
     struct Impl;
 

@@ -74,6 +74,7 @@ void ChildProcess::start(const std::vector<std::string>& argv, const std::string
     }
     ::close(fds[1]);
     pid_ = pid;
+    argv_ = argv;
     stdoutFd_ = fds[0];
     reader_ = std::thread([this] { readStdout(); });
 }

@@ -57,6 +57,8 @@ class ChildProcess {
     bool stopRequested() const { return stopRequested_; }
     pid_t pid() const { return pid_; }
     const std::string& name() const { return name_; }
+    // The command line it was started with (to start it again the same way).
+    const std::vector<std::string>& argv() const { return argv_; }
     const std::filesystem::path& logFile() const { return logFile_; }
     Clock::time_point startTime() const { return started_; }
     // Exit status once reaped (waitpid's status), else nullopt.
@@ -70,6 +72,7 @@ class ChildProcess {
 
     std::string name_;
     std::filesystem::path logFile_;
+    std::vector<std::string> argv_;
     pid_t pid_ = -1;
     int stdoutFd_ = -1;
     Clock::time_point started_{};

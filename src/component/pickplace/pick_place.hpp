@@ -58,8 +58,9 @@ struct PickPlaceOptions {
     // useDiscovery = false: only the endpoints given as parameters and detector()'s URLs).
     skill::detector::DetectorConfig detector;
     PlanOptions plan;
-    std::vector<double> travelVelocity = {0.5, 1.5};  // m/s, rad/s: between the approaches
-    std::vector<double> nearVelocity = {0.1, 1.0};    // m/s, rad/s: approach <-> object
+    std::vector<double> travelVelocity = {
+        0.25, 1.0};  // m/s, rad/s: between the approaches (the robot's default maximum)
+    std::vector<double> nearVelocity = {0.1, 1.0};  // m/s, rad/s: approach <-> object
 
     std::chrono::milliseconds moveTimeout{30000};     // per robot move
     std::chrono::milliseconds gripperTimeout{15000};  // per Grasp / Release

@@ -74,8 +74,8 @@ struct ToolChangerOptions {
 
     double lockAngle = 0.5235987755982988;             // rad (30°): the turn from open to locked
     double liftHeight = 0.10;                          // m above the dock, along world z
-    std::vector<double> travelVelocity = {0.5, 1.5};  // m/s, rad/s: to and from above the dock
-    std::vector<double> dockVelocity = {0.1, 1.0};    // m/s, rad/s: down, turn, up at the dock
+    std::vector<double> travelVelocity = {0.25, 1.0};  // m/s, rad/s: to and from above the dock
+    std::vector<double> dockVelocity = {0.1, 1.0};     // m/s, rad/s: down, turn, up at the dock
     // The world z that the lowest point of what the flange carries (the attached tool's grip
     // point, else the flange) stays above while the arm travels to or from a dock: docks may
     // be beyond a table's edge with the tools hanging below its top. Approach: up from where
