@@ -260,6 +260,19 @@ TEST_F(MesRun, HaltOfExecuteProcessHaltsTheRunningStepsSkill) {
            std::chrono::steady_clock::now() < until)
         std::this_thread::sleep_for(5ms);
     EXPECT_EQ(device->controller->skills().front().state(), skill::ProgramState::Halted);
+    // The halted run's own record is in FinalResultData (written when the run ends).
+    std::string recorded;
+    const auto recordUntil = std::chrono::steady_clock::now() + 3s;
+    while (recorded.find("\"Halted\"") == std::string::npos &&
+           std::chrono::steady_clock::now() < recordUntil) {
+        for (const auto& [name, v] : execute->finalResult(soon()).values)
+            if (name == "Record")
+                if (const auto* s = v.scalar<ua::String>()) recorded = *s;
+        std::this_thread::sleep_for(20ms);
+    }
+    const auto halted = json::parse(recorded.empty() ? "{}" : recorded);
+    EXPECT_EQ(halted.value("result", ""), "Halted") << recorded;
+    EXPECT_EQ(halted.value("process", ""), "urn:pnp:kb:process#long");
 }
 
 TEST_F(MesRun, TheLiveGraphFollowsTheDetector) {

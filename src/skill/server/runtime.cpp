@@ -226,12 +226,18 @@ void SkillRuntime::finish(const Job& job, Outcome outcome) {
         const ProgramState s = state();
         const bool current = job.generation == generation_ && !job.stop.stop_requested() &&
                              (s == ProgramState::Running || s == ProgramState::Suspended);
-        if (current) {
+        // A run halted by a client (Halt set Result and Message already) still leaves what it
+        // reports, e.g. how far a composite got — unless a new run has started since.
+        const bool halted = job.generation == generation_ && job.stop.stop_requested() &&
+                            s == ProgramState::Halted;
+        if (current || halted) {
             auto& space = server_.addressSpace();
             for (auto& [name, value] : outcome.results) {
                 auto it = nodes_.results.find(name);
                 if (it != nodes_.results.end()) space.setValue(it->second, ua::DataValue(value));
             }
+        }
+        if (current) {
             const bool ok = outcome.result == SkillResult::Completed;
             if (!ok && outcome.message.empty())
                 outcome.message = std::string(toString(outcome.result));
