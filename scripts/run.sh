@@ -8,7 +8,8 @@
 #   scripts/run.sh [pnp cell run options]   e.g. --netns (root), --report FILE, --log-dir DIR
 #   scripts/run.sh --up [options]           the same cell left running until Ctrl-C
 #   scripts/run.sh --server [args]          only the demo server on port $PNP_PORT (4840)
-# PNP_SIM_SECONDS is gone: the main job ends by itself (about 1-2 minutes); `--up` runs
+# PNP_SIM_SECONDS is gone: the main job ends by itself (about 3 minutes of simulated motion
+# on two cores, two rounds of the thesis process); `--up` runs
 # until Ctrl-C.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

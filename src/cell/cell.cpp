@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <cmath>
 #include <fstream>
 #include <iostream>
@@ -41,18 +42,25 @@ double msSince(Clock::time_point from, Clock::time_point to) {
 }
 
 // A TCP port that was free a moment ago (the tool adapters' fixed OPC UA ports: their
-// endpoint is then printed at start, not at the first power-up).
+// endpoint is then printed at start, not at the first power-up). An address of another
+// network namespace (--netns: a device's own) is not ours to bind: any port is free in that
+// fresh namespace, so one of ours is taken as the number.
 unsigned short freePort(const std::string& host) {
-    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    ::inet_pton(AF_INET, host.c_str(), &a.sin_addr);
-    socklen_t len = sizeof a;
-    unsigned short port = 0;
-    if (fd >= 0 && ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-        ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
-        port = ntohs(a.sin_port);
-    if (fd >= 0) ::close(fd);
+    auto tryBind = [](const std::string& address) -> unsigned short {
+        const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        sockaddr_in a{};
+        a.sin_family = AF_INET;
+        ::inet_pton(AF_INET, address.c_str(), &a.sin_addr);
+        socklen_t len = sizeof a;
+        unsigned short port = 0;
+        if (fd >= 0 && ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+            ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
+            port = ntohs(a.sin_port);
+        if (fd >= 0) ::close(fd);
+        return port;
+    };
+    unsigned short port = tryBind(host);
+    if (port == 0 && errno == EADDRNOTAVAIL) port = tryBind("127.0.0.1");
     if (port == 0) throw CellError("no free TCP port on " + host);
     return port;
 }
