@@ -18,11 +18,14 @@ bool finite(const Joints& v) {
 
 // Depth of `point` below the top face of a box whose top face centre is `top` (its z axis the
 // face normal), or 0 when the point is outside the footprint, above the face or below the
-// body (a point under a table is not pushed up through it).
+// body (a point under a table is not pushed up through it). A point within `touch` of a side
+// face touches it (a finger tip closed onto the side of a part, up to rounding): no depth.
 double depthBelowTop(const Eigen::Isometry3d& top, const Eigen::Vector3d& size,
-                     const Eigen::Vector3d& point) {
+                     const Eigen::Vector3d& point, double touch) {
     const Eigen::Vector3d local = top.inverse() * point;
-    if (std::abs(local.x()) > 0.5 * size.x() || std::abs(local.y()) > 0.5 * size.y()) return 0.0;
+    if (std::abs(local.x()) >= 0.5 * size.x() - touch ||
+        std::abs(local.y()) >= 0.5 * size.y() - touch)
+        return 0.0;
     const double depth = -local.z();
     if (depth <= 0.0 || depth > size.z()) return 0.0;
     return depth;
@@ -96,7 +99,7 @@ Eigen::Vector3d World::contactForceAt(const Eigen::Vector3d& point) const {
     double deepest = 0.0;
     Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
     auto consider = [&](const Eigen::Isometry3d& top, const Eigen::Vector3d& size) {
-        const double d = depthBelowTop(top, size, point);
+        const double d = depthBelowTop(top, size, point, config_.touchTolerance);
         if (d > deepest) {
             deepest = d;
             normal = top.linear().col(2);
@@ -295,6 +298,11 @@ bool World::hold(std::size_t tool, std::size_t object) {
     const auto grip = gripPoint(tool);
     if (!grip) return false;
     heldOffsets_.at(tool) = grip->inverse() * o.pose;
+    if (cell_.tools.at(tool).kind == ToolKind::kParallelGripper) {
+        // The jaws close on both sides: the part ends up centred between them.
+        heldOffsets_[tool].translation().x() = 0.0;
+        o.pose = *grip * heldOffsets_[tool];
+    }
     o.holder = t.name;
     t.held = o.name;
     return true;
@@ -312,7 +320,51 @@ void World::release(std::size_t tool) {
 
 void World::setFingerOpening(std::size_t tool, double opening) {
     if (!std::isfinite(opening)) return;
-    fingerOpenings_.at(tool) = std::clamp(opening, 0.0, cell_.tools.at(tool).stroke);
+    const double before = fingerOpenings_.at(tool);
+    fingerOpenings_[tool] = std::clamp(opening, 0.0, cell_.tools.at(tool).stroke);
+    if (fingerOpenings_[tool] < before) pushBetweenFingers(tool, before, fingerOpenings_[tool]);
+}
+
+void World::pushBetweenFingers(std::size_t tool, double before, double after) {
+    const ToolDescription& d = cell_.tools.at(tool);
+    if (d.kind != ToolKind::kParallelGripper) return;
+    const auto grip = gripPoint(tool);
+    if (!grip) return;
+    const Eigen::Vector3d across = grip->linear().col(0);  // the fingers' axis
+    const Eigen::Vector3d side = grip->linear().col(1);
+    const Eigen::Vector3d out = grip->linear().col(2);
+    const double from = 0.5 * before, to = 0.5 * after;  // each tip's travel, from the centre
+    for (std::size_t i = 0; i < objects_.size(); ++i) {
+        if (!resting(i)) continue;
+        ObjectState& o = objects_[i];
+        const Eigen::Vector3d size = cell_.objects[i].size;
+        const Eigen::Vector3d c = grip->inverse() * o.pose.translation();
+        const double hx = halfExtent(o.pose.linear(), size, across);
+        const double hy = halfExtent(o.pose.linear(), size, side);
+        const double hz = halfExtent(o.pose.linear(), size, out);
+        // In the fingers' path: across their line, and within the pads' depth.
+        if (std::abs(c.y()) >= hy) continue;
+        if (std::min(0.0, c.z() + hz) - std::max(-config_.fingerPad, c.z() - hz) <= 0.0) continue;
+        // A tip that was outside a side face and has swept past it pushes the face along; a tip
+        // already inside the object (the tool came down onto it) pushes nothing: that is the
+        // top-face contact.
+        const double low = c.x() - hx, high = c.x() + hx;
+        const bool plus = high > to && high <= from + config_.touchTolerance;
+        const bool minus = low < -to && low >= -from - config_.touchTolerance;
+        double shift = 0.0;
+        if (plus && minus) {
+            shift = -c.x();  // squeezed from both sides: wider than the opening, centred
+        } else if (plus) {
+            shift = to - high;
+        } else if (minus) {
+            shift = -to - low;
+        }
+        if (shift == 0.0) continue;
+        // It slides on what it rests on: sideways only, at its height.
+        const double z = o.pose.translation().z();
+        o.pose.translation() += shift * across;
+        o.pose.translation().z() = z;
+    }
 }
 
 std::optional<std::size_t> World::held(std::size_t tool) const {

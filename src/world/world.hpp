@@ -87,6 +87,9 @@ struct WorldConfig {
     double cupSealDistance = 0.004;   // m: cup within this above or (pressed) below a face
     double cupTiltTolerance = 0.087;  // rad (5°) between the cup's axis and the face normal
     double restTolerance = 0.002;     // m: a support up to this above an object's bottom
+    // A point this close to a side face of a body touches the face, it is not inside (a finger
+    // tip closed onto a part's side, up to rounding): no contact force.
+    double touchTolerance = 1e-6;  // m
 };
 
 // The object between a parallel gripper's fingers and its width across them.
@@ -127,8 +130,9 @@ class World {
     // Vacuum gripper: the object whose flat top face seals the cup at the grip point (the
     // cup's axis along the face normal, its whole rim on the face, touching it).
     std::optional<std::size_t> objectUnderCup(std::size_t tool) const;
-    // The tool takes hold of the object (it follows the grip point from now on); false when
-    // the tool already holds another one, or the object is held by another tool.
+    // The tool takes hold of the object (it follows the grip point from now on; a parallel
+    // gripper's jaws hold it centred between them); false when the tool already holds another
+    // one, or the object is held by another tool.
     bool hold(std::size_t tool, std::size_t object);
     // It lets go: the object comes to rest on what is below it (the highest top face of a
     // table or a resting object under its centre) or falls to the floor.
@@ -137,6 +141,9 @@ class World {
     // A parallel gripper's opening (m), told by its device simulator as the fingers move:
     // the contact force of a robot with that tool acts on its two finger tips, not on the
     // point between them (where an object sits while the fingers close around it).
+    // Closing, a finger tip that meets the side face of a resting object pushes it along the
+    // fingers' axis (it slides on its support), so the fingers close on it centred; a tip
+    // already inside an object (the tool came down onto it) pushes nothing.
     // Default: the stroke (fully open).
     void setFingerOpening(std::size_t tool, double opening);
 
@@ -163,9 +170,10 @@ class World {
     Snapshot snapshot() const;
 
     // The contact force (world frame, N) on a point: the spring of the deepest top face
-    // (tables, objects resting somewhere, not held ones) whose footprint holds the point and
-    // below which it lies, within the body's height; zero otherwise. step() applies it to
-    // each robot's TCP point.
+    // (tables, objects resting somewhere, not held ones) whose footprint holds the point (on
+    // a side face, within touchTolerance, it only touches) and below which it lies, within
+    // the body's height; zero otherwise. step() applies it to each robot's TCP point (a
+    // parallel gripper's: its two finger tips).
     Eigen::Vector3d contactForceAt(const Eigen::Vector3d& point) const;
 
     // The Kelvin state voltage for a changer state (24 V scale).
@@ -176,6 +184,7 @@ class World {
     void updateChanger(std::size_t robot);
     void updateHeld();
     void settle(std::size_t object);
+    void pushBetweenFingers(std::size_t tool, double before, double after);
     std::optional<Eigen::Isometry3d> toolFrame(std::size_t tool) const;
     std::optional<std::size_t> toolIndex(const std::string& name) const;
     std::optional<std::size_t> objectIndex(const std::string& name) const;

@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 #include <modbus.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <memory>
 #include <thread>
@@ -412,6 +414,88 @@ TEST_F(WithObject, GraspAnObjectAsInTheManual) {
     run(1.0);
     EXPECT_EQ(exchange(peer, "09 04 07 D0 00 03 B1 CE", 11), "09 04 06 F9 00 00 00 0D 00 17 AA");
 }
+
+// The 4 cm green cube on the table, its centre `offset` (m) beside the grip point along the
+// fingers' axis (the robot's tracking error, a cube put down off its nominal place), turned as
+// the fingers; the grip point at the height of its centre.
+world::CellDescription cubeOffCentreBetweenTheFingers(double offset) {
+    world::CellDescription cell = gripperOnFlange();
+    if (cell.objects.empty() || cell.robots.empty()) return cell;
+    world::ObjectDescription& cube = cell.objects[0];
+    const world::RobotDescription& r = cell.robots[0];
+    const world::ToolDescription* t = cell.findTool("parallel-gripper");
+    Eigen::Isometry3d flange = r.base * kinematics::forward(r.model, r.home);
+    const Eigen::Vector3d across = flange.linear() * t->tcp.linear().col(0);  // horizontal
+    const Eigen::Vector3d grip = cube.pose.translation() - offset * across;
+    flange.translation() = grip - flange.linear() * t->tcp.translation();
+    cube.pose.linear() =
+        Eigen::AngleAxisd(std::atan2(across.y(), across.x()), Eigen::Vector3d::UnitZ())
+            .toRotationMatrix();
+    auto q = kinematics::solveNearest(r.model, r.base.inverse() * flange, r.home);
+    if (!q.ok()) {
+        ADD_FAILURE() << q.error().message;
+        return cell;
+    }
+    cell.robots[0].home = *q;
+    return cell;
+}
+
+struct OffCentre : Fixture, ::testing::WithParamInterface<double> {
+    OffCentre() : Fixture(cubeOffCentreBetweenTheFingers(GetParam())) {}
+
+    // The UR's protective stop limit (sim::ur::UrControllerConfig::protectiveStopForce).
+    static constexpr double kProtectiveStopForce = 250.0;  // N
+    double maxForce = 0.0;
+
+    // As run(), the world refreshed after the gripper's step too (as the robot controller's
+    // next setJoints does), recording the largest TCP force.
+    void stepAndWatch(double seconds) {
+        const int steps = static_cast<int>(std::lround(seconds / kDt));
+        for (int i = 0; i < steps; ++i) {
+            world.step(kDt);
+            maxForce = std::max(maxForce, world.robot(0).tcpForce.norm());
+            gripper.step(kDt);
+            world.step(0.0);
+            maxForce = std::max(maxForce, world.robot(0).tcpForce.norm());
+        }
+    }
+};
+
+TEST_P(OffCentre, FingersClosingCentreTheCubeWithoutATcpForce) {
+    SerialPeer peer(pty.path());
+    ASSERT_TRUE(peer.ok());
+    const std::size_t cube = 0;
+    // Activate (the fingers open fully), then close at full speed and force (rPR 255).
+    EXPECT_EQ(exchange(peer, "09 10 03 E8 00 03 06 01 00 00 00 00 00 72 E1", 8),
+              "09 10 03 E8 00 03 01 30");
+    stepAndWatch(1.002);
+    EXPECT_EQ(maxForce, 0.0) << "the open fingers are clear of the cube";
+    EXPECT_EQ(exchange(peer, "09 10 03 E8 00 03 06 09 00 00 FF FF FF 42 29", 8),
+              "09 10 03 E8 00 03 01 30");
+    stepAndWatch(1.0);
+    // The first finger to touch pushed the cube along the table to the centre; held there.
+    EXPECT_EQ(world.held(tool), std::optional<std::size_t>(cube));
+    EXPECT_NEAR(gripper.opening(), 0.04, 1e-9);
+    const auto grip = world.gripPoint(tool);
+    ASSERT_TRUE(grip);
+    const Eigen::Vector3d inGrip = grip->inverse() * world.objects()[cube].pose.translation();
+    EXPECT_NEAR(inGrip.x(), 0.0, 1e-9) << "held centred between the jaws";
+    EXPECT_NEAR(inGrip.y(), 0.0, 1e-9);
+    EXPECT_LT(maxForce, 1.0) << "closing: side contact is no push into a top face (the UR "
+                             << "stops at " << kProtectiveStopForce << " N)";
+    maxForce = 0.0;
+    // Open (rPR 0): it rests on the table where it is, centred; the fingers leave its sides.
+    EXPECT_EQ(exchange(peer, "09 10 03 E8 00 03 06 09 00 00 00 FF FF 72 19", 8),
+              "09 10 03 E8 00 03 01 30");
+    stepAndWatch(1.0);
+    EXPECT_FALSE(world.held(tool));
+    EXPECT_EQ(world.objects()[cube].holder, "table");
+    EXPECT_NEAR(world.objects()[cube].pose.translation().z(), 0.02, 1e-9);
+    EXPECT_LT(maxForce, 1.0) << "releasing: side contact is no push into a top face";
+}
+
+INSTANTIATE_TEST_SUITE_P(CubeOffTheGripPoint, OffCentre,
+                         ::testing::Values(0.0, 0.0005, -0.0005, 0.001, -0.001));
 
 }  // namespace
 }  // namespace pnp::sim::robotiq::test

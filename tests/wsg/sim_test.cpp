@@ -3,6 +3,9 @@
 // world, power.
 #include <gtest/gtest.h>
 
+#include <cmath>
+
+#include "kinematics/kinematics.hpp"
 #include "wsg_helpers.hpp"
 
 namespace pnp::wsg::test {
@@ -330,6 +333,116 @@ TEST(WsgSim, DisconnectWithoutAnnouncementRaisesFastStopWhenConfigured) {
         ASSERT_TRUE(waitFor([&] { return rig.wsg.state().connections == 1; }, 1000ms));
     }
     EXPECT_TRUE(waitFor([&] { return rig.wsg.state().fastStop; }, 2000ms));
+}
+
+}  // namespace
+}  // namespace pnp::wsg::test
+
+namespace pnp::wsg::test {
+namespace {
+
+// The thesis cell with the WSG on the UR5's flange, its grip point (the finger tips) at the
+// height of the green cube's centre but `offset` (m) beside it along the fingers' axis, as the
+// robot's tracking error or a cube put down off its nominal place leaves it. The cube rests
+// on the table, turned as the fingers.
+world::CellDescription cubeOffCentreBetweenTheFingers(double offset) {
+    world::CellDescription cell = cellWithWsg(true);
+    if (cell.objects.empty() || cell.robots.empty()) {
+        ADD_FAILURE() << "no cube or robot in the thesis cell";
+        return cell;
+    }
+    world::ObjectDescription& cube = cell.objects[0];
+    const world::RobotDescription& r = cell.robots[0];
+    const world::ToolDescription* t = cell.findTool(kTool);
+    Eigen::Isometry3d flange = r.base * kinematics::forward(r.model, r.home);
+    const Eigen::Vector3d across = flange.linear() * t->tcp.linear().col(0);  // horizontal
+    const Eigen::Vector3d grip = cube.pose.translation() - offset * across;
+    flange.translation() = grip - flange.linear() * t->tcp.translation();
+    cube.pose.linear() =
+        Eigen::AngleAxisd(std::atan2(across.y(), across.x()), Eigen::Vector3d::UnitZ())
+            .toRotationMatrix();
+    auto q = kinematics::solveNearest(r.model, r.base.inverse() * flange, r.home);
+    if (!q.ok()) {
+        ADD_FAILURE() << q.error().message;
+        return cell;
+    }
+    cell.robots[0].home = *q;
+    return cell;
+}
+
+// The UR's protective stop limit (sim::ur::UrControllerConfig::protectiveStopForce).
+constexpr double kProtectiveStopForce = 250.0;  // N
+
+// Steps the world and the gripper by hand (deterministic: the network thread only takes the
+// commands, each answered "pending" before the stepping goes on), the world refreshed after the
+// gripper's step as the robot controller's next setJoints does; records the largest TCP force.
+struct HandStepped {
+    explicit HandStepped(double offset)
+        : world(cubeOffCentreBetweenTheFingers(offset)),
+          tool(toolIndex(world.description())),
+          wsg(world, tool, anyPort()) {}
+    world::World world;
+    std::size_t tool;
+    sim::wsg::Wsg50 wsg;
+    double maxForce = 0.0;
+
+    void step() {
+        world.step(0.002);
+        maxForce = std::max(maxForce, world.robot(0).tcpForce.norm());
+        wsg.step(0.002);
+        world.step(0.0);
+        maxForce = std::max(maxForce, world.robot(0).tcpForce.norm());
+    }
+    // A motion command: pending at once, then stepped (at most `maxSteps`) to its end.
+    std::optional<Response> motion(RawClient& c, Command command,
+                                   const std::vector<std::uint8_t>& payload, int maxSteps = 2000) {
+        auto r = c.call(command, payload);
+        if (!r || !r->pending()) return r;
+        for (int i = 0; i < maxSteps && wsg.state().moving; ++i) step();
+        return c.response(2000ms);
+    }
+};
+
+TEST(WsgSim, FingersClosingOnAnOffCentreCubeCentreItWithoutATcpForce) {
+    for (const double offset : {0.0, 0.0005, -0.0005, 0.001, -0.001}) {
+        SCOPED_TRACE("cube centre " + std::to_string(offset * 1000.0) + " mm off the grip point");
+        HandStepped rig(offset);
+        const std::size_t cube = 0;
+        ASSERT_FALSE(rig.world.held(rig.tool));
+        ASSERT_TRUE(waitFor(
+            [&] {
+                rig.step();
+                return rig.wsg.state().listening;
+            },
+            2000ms));
+        RawClient c;
+        ASSERT_TRUE(c.connect(rig.wsg.port()));
+        auto r = rig.motion(c, Command::kHoming, homingPayload());
+        ASSERT_TRUE(r && r->ok());
+        EXPECT_EQ(rig.maxForce, 0.0) << "the open fingers are clear of the cube";
+        // Closing: the first finger to touch pushes the cube along the table to the centre.
+        r = rig.motion(c, Command::kGrasp, graspPayload(40.0f, 100.0f));
+        ASSERT_TRUE(r);
+        EXPECT_EQ(r->status, st(Status::kSuccess));
+        EXPECT_EQ(rig.world.held(rig.tool), cube);
+        EXPECT_NEAR(rig.wsg.state().width, 40.0, 1e-6);
+        const auto grip = rig.world.gripPoint(rig.tool);
+        ASSERT_TRUE(grip);
+        const Eigen::Vector3d inGrip =
+            grip->inverse() * rig.world.objects()[cube].pose.translation();
+        EXPECT_NEAR(inGrip.x(), 0.0, 1e-9) << "held centred between the jaws";
+        EXPECT_NEAR(inGrip.y(), 0.0, 1e-9);
+        EXPECT_LT(rig.maxForce, 1.0) << "closing: side contact is no push into a top face";
+        rig.maxForce = 0.0;
+        // Letting go: it rests on the table where it is, centred; the fingers leave its sides.
+        r = rig.motion(c, Command::kRelease, graspPayload(60.0f, 100.0f));
+        ASSERT_TRUE(r && r->ok());
+        EXPECT_FALSE(rig.world.held(rig.tool));
+        EXPECT_EQ(rig.world.objects()[cube].holder, "table");
+        EXPECT_NEAR(rig.world.objects()[cube].pose.translation().z(), 0.02, 1e-9);
+        EXPECT_LT(rig.maxForce, 1.0)
+            << "releasing: side contact (the UR stops at " << kProtectiveStopForce << " N)";
+    }
 }
 
 }  // namespace

@@ -232,6 +232,85 @@ TEST(WorldGrip, AHeldObjectFollowsAndRestsWhereReleased) {
     EXPECT_NEAR(world.objects()[cube].pose.linear().col(2).z(), 1.0, 1e-9);
 }
 
+// The cube turned as the fingers, its centre `offset` along their axis from the grip point
+// (tracking error); the fingers open `opening`. Returns the fingers' axis (world frame).
+Eigen::Vector3d cubeOffTheGripPoint(World& world, double offset, double opening) {
+    const std::size_t g = toolIndex(world, "parallel-gripper");
+    const std::size_t cube = objectIndex(world, "cube-green");
+    world.setFingerOpening(g, opening);
+    const Eigen::Vector3d centre = world.objects()[cube].pose.translation();
+    const Eigen::Vector3d across = world.gripPoint(g)->linear().col(0);
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation() = centre;
+    pose.rotate(Eigen::AngleAxisd(std::atan2(across.y(), across.x()), Eigen::Vector3d::UnitZ()));
+    EXPECT_EQ(world.placeObject("cube-green", pose), "");
+    moveFlange(world, flangeForGrip(world, "parallel-gripper", centre - offset * across));
+    return across;
+}
+
+TEST(WorldGrip, ClosingFingersPushAnOffCentreCubeToTheirCentre) {
+    for (const double offset : {0.001, -0.001, 0.0005}) {
+        World world = withTool("parallel-gripper");
+        const std::size_t g = toolIndex(world, "parallel-gripper");
+        const std::size_t cube = objectIndex(world, "cube-green");
+        cubeOffTheGripPoint(world, offset, 0.05);
+        EXPECT_EQ(world.robot(0).tcpForce, Eigen::Vector3d::Zero());
+        // Closing by 0.1 mm a step onto the 40 mm cube: the first tip to touch pushes it along
+        // the table; no tip ever goes into it, so no force.
+        double maxForce = 0.0;
+        for (int i = 1; i <= 100; ++i) {
+            world.setFingerOpening(g, 0.05 - 0.0001 * i);
+            world.step(kDt);
+            maxForce = std::max(maxForce, world.robot(0).tcpForce.norm());
+        }
+        EXPECT_EQ(maxForce, 0.0) << offset;
+        const Eigen::Isometry3d grip = *world.gripPoint(g);
+        Eigen::Vector3d inGrip = grip.inverse() * world.objects()[cube].pose.translation();
+        EXPECT_NEAR(inGrip.x(), 0.0, 1e-9) << "centred between the fingers at 40 mm";
+        EXPECT_EQ(world.objects()[cube].holder, "table");
+        EXPECT_NEAR(world.objects()[cube].pose.translation().z(), 0.02, 1e-12) << "it slid";
+        // Opening again leaves it where it is.
+        world.setFingerOpening(g, 0.06);
+        world.step(kDt);
+        inGrip = grip.inverse() * world.objects()[cube].pose.translation();
+        EXPECT_NEAR(inGrip.x(), 0.0, 1e-9);
+    }
+}
+
+TEST(WorldGrip, HeldBetweenTheJawsCentredAndReleasedWithoutForce) {
+    World world = withTool("parallel-gripper");
+    const std::size_t g = toolIndex(world, "parallel-gripper");
+    const std::size_t cube = objectIndex(world, "cube-green");
+    // The jaws at the cube's width, the cube 0.3 mm off their centre (within the fingers'
+    // clearance): held, it sits centred between them.
+    cubeOffTheGripPoint(world, 0.0003, 0.0406);
+    world.setFingerOpening(g, 0.04);
+    ASSERT_TRUE(world.hold(g, cube));
+    const Eigen::Isometry3d grip = *world.gripPoint(g);
+    EXPECT_NEAR((grip.inverse() * world.objects()[cube].pose.translation()).x(), 0.0, 1e-12);
+    // Let go with the tips on its side faces: they touch, they do not push into its top.
+    world.release(g);
+    world.step(kDt);
+    EXPECT_EQ(world.objects()[cube].holder, "table");
+    EXPECT_EQ(world.robot(0).tcpForce, Eigen::Vector3d::Zero());
+}
+
+TEST(WorldGrip, FingersComingDownOntoACubeStillPushIntoItsTop) {
+    World world = withTool("parallel-gripper");
+    const std::size_t g = toolIndex(world, "parallel-gripper");
+    const std::size_t cube = objectIndex(world, "cube-green");
+    // Open 30 mm over the 40 mm cube, lowered to its middle: both tips 20 mm into its top face.
+    cubeOffTheGripPoint(world, 0.0, 0.03);
+    EXPECT_NEAR(world.robot(0).tcpForce.z(), 2 * 20000.0 * 0.02, 1e-6);
+    // Closing them further pushes nothing sideways: the tips are inside, not at a side face.
+    const Eigen::Vector3d before = world.objects()[cube].pose.translation();
+    world.setFingerOpening(g, 0.02);
+    world.step(kDt);
+    EXPECT_EQ(world.objects()[cube].pose.translation(), before);
+    EXPECT_NEAR(world.robot(0).tcpForce.z(), 2 * 20000.0 * 0.02, 1e-6);
+    EXPECT_FALSE(world.objectBetweenFingers(g, 0.02).has_value()) << "wider than the opening";
+}
+
 TEST(WorldGrip, ReleasedBesideTheTableItFallsToTheFloor) {
     World world = withTool("parallel-gripper");
     const std::size_t g = toolIndex(world, "parallel-gripper");
