@@ -95,6 +95,7 @@ int runUrDevice(UrDeviceOptions& o) {
     const motion::Limits limits = device::robot::defaultLimits(*model);
     robot::ControllerConfig cc;
     cc.limits = limits.joint;
+    cc.log = [](const std::string& line) { std::cerr << "pnp device ur: " << line << std::endl; };
     robot::Controller controller(hardware, cc);
     auto started =
         controller.start(robot::Clock::now() + std::chrono::milliseconds(o.connectTimeoutMs));

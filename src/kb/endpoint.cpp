@@ -74,8 +74,8 @@ struct Curl {
 
 class EndpointKnowledgeBase final : public KnowledgeBase {
   public:
-    EndpointKnowledgeBase(std::string url, std::string host, int port, std::string path)
-        : url_(std::move(url)), host_(std::move(host)), port_(port), path_(std::move(path)) {}
+    // The URL was checked (host, port) by openEndpoint(); libcurl takes it whole.
+    explicit EndpointKnowledgeBase(std::string url) : url_(std::move(url)) {}
 
     Results select(std::string_view query, Deadline deadline) override {
         auto json = queryJson(query, deadline);
@@ -265,9 +265,7 @@ class EndpointKnowledgeBase final : public KnowledgeBase {
         return std::move(sink.body);
     }
 
-    std::string url_, host_;
-    int port_;
-    std::string path_;
+    std::string url_;
 };
 
 }  // namespace
@@ -278,7 +276,6 @@ std::unique_ptr<KnowledgeBase> openEndpoint(const std::string& url) {
     std::string rest = url.substr(scheme.size());
     auto slash = rest.find('/');
     std::string authority = rest.substr(0, slash);
-    std::string path = slash == std::string::npos ? "/" : rest.substr(slash);
     int port = 80;
     std::string host = authority;
     if (auto colon = authority.rfind(':'); colon != std::string::npos) {
@@ -293,7 +290,7 @@ std::unique_ptr<KnowledgeBase> openEndpoint(const std::string& url) {
     if (host.empty() || host.find_first_of("@[] ") != std::string::npos) {
         throw KbError("'" + url + "': bad host '" + host + "'");
     }
-    return std::make_unique<EndpointKnowledgeBase>(url, host, port, path);
+    return std::make_unique<EndpointKnowledgeBase>(url);
 }
 
 }  // namespace pnp::kb

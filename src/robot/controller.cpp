@@ -309,6 +309,11 @@ struct Controller::Impl {
     std::size_t periodCount = 0;
     std::uint64_t cycles = 0;
     std::uint64_t linkLosses = 0;
+    // Whether a loss happened since the link was last up (for the "back" line).
+    bool lostSinceConnect() {
+        std::lock_guard lock(mutex);
+        return linkLosses > 0;
+    }
     bool realtime = false;
 
     // Loop thread only.
@@ -340,6 +345,7 @@ void Controller::Impl::failMotions(const std::string& why) {
 }
 
 void Controller::Impl::linkLost(const std::string& why) {
+    if (config.log) config.log("link to the controller lost (" + why + "); reconnecting");
     failMotions("link to the controller lost (" + why + ")");
     hw.disconnect();
     connected.store(false);
@@ -453,6 +459,7 @@ void Controller::Impl::run(std::stop_token stop) {
                 hw.disconnect();
                 continue;
             }
+            if (config.log && lostSinceConnect()) config.log("link to the controller back");
             connected.store(true);
         }
         auto state = hw.read(Clock::now() + config.readTimeout);

@@ -26,6 +26,9 @@ struct ControllerConfig {
     motion::JointLimits limits;
     // Added: one (re)connect attempt may take this long (start() has its own deadline).
     std::chrono::milliseconds connectTimeout{2000};
+    // Told when the link is lost (why) and when it is back; called on the loop thread, must
+    // not block. Empty: nobody is told (the statistics still count the losses).
+    std::function<void(const std::string&)> log;
 };
 
 // How a motion ended.

@@ -74,8 +74,7 @@ proc:faults-1 a pnp:Step ; pnp:process proc:faults ; pnp:index 1 ;
     pnp:skillType tc:ChangeToolSkillType ;
     pnp:binding
         [ pnp:name "ToolPosition" ; pnp:from cell:dock-1 ; pnp:via pnp:pose ] ,
-        [ pnp:name "ToolAppUri" ; pnp:value "" ] ,
-        [ pnp:name "MoveSkillControllerEndpoint" ; pnp:value "" ] .
+        [ pnp:name "ToolAppUri" ; pnp:value "" ] .
 
 proc:faults-2 a pnp:Step ; pnp:process proc:faults ; pnp:index 2 ;
     rdfs:label "pick the green cube and place it at place B" ;
