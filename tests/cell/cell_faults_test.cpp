@@ -396,8 +396,8 @@ TEST_F(CellFaults, TheCellUpLineNamesEveryProcess) {
         EXPECT_EQ(argv[0], kPnp) << c.dump();
         EXPECT_EQ(c.value("url", std::string()).rfind("opc.tcp://", 0), 0u) << c.dump();
     }
-    EXPECT_EQ(child("sim").at("url"), cell_.at("world"));
-    EXPECT_EQ(child("mes").at("url"), cell_.at("mes"));
+    EXPECT_EQ(child("sim").at("url").get<std::string>(), cell_.at("world").get<std::string>());
+    EXPECT_EQ(child("mes").at("url").get<std::string>(), cell_.at("mes").get<std::string>());
     EXPECT_TRUE(cell_.at("problems").empty()) << cell_.at("problems").dump();
     EXPECT_EQ(cell_.at("pid").get<pid_t>(), up_->pid());
 }
@@ -501,7 +501,8 @@ TEST_F(CellFaults, AGripperKilledMidProcessFailsItAndAfterItsReturnARunCompletes
     // The adapter back with its command line: powered, it serves at once, at the same URL.
     const std::string back = restart("ecbpi", "{");
     ASSERT_NE(back, "");
-    EXPECT_EQ(json::parse(back, nullptr, false).value("endpointUrl", ""), child("ecbpi").at("url"));
+    EXPECT_EQ(json::parse(back, nullptr, false).value("endpointUrl", ""),
+              child("ecbpi").at("url").get<std::string>());
     ASSERT_TRUE(discovered(skill::types::GraspGripperSkillType, gripperUri, true, 15s))
         << "the restarted gripper's skills were not detected" << logTail("ecbpi");
 
