@@ -31,13 +31,6 @@ namespace client = skill::client;
 
 namespace {
 
-std::string formatPosition(const Isometry3d& p) {
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f)", p.translation().x(), p.translation().y(),
-                  p.translation().z());
-    return buf;
-}
-
 double unixSeconds(const ua::DateTime& t) { return static_cast<double>(t.toUnixNanos()) * 1e-9; }
 
 // A lower skill on another component's server, kept across runs (its subscription too).
@@ -669,15 +662,17 @@ struct PickPlaceComponent::Impl : std::enable_shared_from_this<Impl> {
         seq.push_back({steps::Release, release, {}, options.gripperTimeout});
         seq.push_back(moveStep(steps::MovePlaceApproachAfter, move, plan->placeApproach,
                                options.nearVelocity, frame));
-        options.log("PickAndPlace " + objectId + " from " + formatPosition(object->pose) + " to " +
-                    formatPosition(plan->objectAtPlace) + " with " + tool->grasp.componentName +
-                    " (" + toString(tool->grip.kind) + ") and " + robot->move.componentName);
+        options.log("PickAndPlace " + objectId + " from " +
+                    ua::spatial::positionText(object->pose) + " to " +
+                    ua::spatial::positionText(plan->objectAtPlace) + " with " +
+                    tool->grasp.componentName + " (" + toString(tool->grip.kind) + ") and " +
+                    robot->move.componentName);
 
         auto [failedAt, end] = runSteps(r, seq);
         if (failedAt == seq.size()) {
             unlockAll(r);
             std::string message =
-                "placed " + objectId + " at " + formatPosition(plan->objectAtPlace);
+                "placed " + objectId + " at " + ua::spatial::positionText(plan->objectAtPlace);
             try {
                 storeObjectPose(*options.knowledge, objectId, plan->objectAtPlace,
                                 Clock::now() + options.requestTimeout);
@@ -714,7 +709,7 @@ struct PickPlaceComponent::Impl : std::enable_shared_from_this<Impl> {
                 why += "; moving back up to the approach pose: " + e.message;
             else
                 why += "; the robot is back at the approach pose " +
-                       formatPosition(atPick ? plan->pickApproach : plan->placeApproach);
+                       ua::spatial::positionText(atPick ? plan->pickApproach : plan->placeApproach);
         }
         unlockAll(r);
         options.log("failed: " + why);

@@ -31,13 +31,6 @@ namespace kelvin = device::kelvin;
 
 namespace {
 
-std::string formatPosition(const Isometry3d& p) {
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f)", p.translation().x(), p.translation().y(),
-                  p.translation().z());
-    return buf;
-}
-
 std::string formatSeconds(double s) {
     char buf[32];
     std::snprintf(buf, sizeof buf, "%.3f s", s);
@@ -317,7 +310,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             return Stop{skill::SkillResult::Aborted, "halted: " + m.message};
         }
         return Stop{skill::SkillResult::Failed,
-                    m.message + " (moving to " + formatPosition(target) + ")"};
+                    m.message + " (moving to " + ua::spatial::positionText(target) + ")"};
     }
 
     // ---- travel height -------------------------------------------------------------------
@@ -345,7 +338,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         std::string error;
         const std::optional<Isometry3d> here = r.arm->flangePose(error);
         if (!here) {
-            options.log("straight to " + formatPosition(target) +
+            options.log("straight to " + ua::spatial::positionText(target) +
                         ": where the arm is is unknown (" + error + ")");
             return move(r, target, options.travelVelocity);
         }
@@ -400,7 +393,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             MoveOutcome m = r.arm->moveLinear(p, options.dockVelocity, options.moveTimeout, r.stop);
             if (!m.completed)
                 return "; could not move clear of the dock: " + m.message + " (to " +
-                       formatPosition(p) + ")";
+                       ua::spatial::positionText(p) + ")";
         }
         return {};
     }
@@ -428,7 +421,7 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
         p.open = dock * Eigen::AngleAxisd(-options.lockAngle, Eigen::Vector3d::UnitZ());
         p.openAbove = raised(p.open, options.liftHeight);
         p.lockedAbove = raised(dock, options.liftHeight);
-        p.where = " at the dock " + formatPosition(dock);
+        p.where = " at the dock " + ua::spatial::positionText(dock);
         return p;
     }
 
@@ -922,8 +915,8 @@ struct ToolChangerComponent::Impl : std::enable_shared_from_this<Impl> {
             std::string report = "halted during " +
                                  (r.phase.empty() && !r.phases.empty() ? r.phases.back().name
                                                                        : std::string("the start")) +
-                                 " at the dock " + formatPosition(r.dock) + ": changer " +
-                                 describe(now);
+                                 " at the dock " + ua::spatial::positionText(r.dock) +
+                                 ": changer " + describe(now);
             if (!now.valid || now.reading.state == ChangerState::kIntermediate)
                 report +=
                     ": the tool may be half locked; turn the changer back by hand or run "

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace pnp::ua::spatial {
 
@@ -47,6 +48,13 @@ bool finite(const ThreeDFrame& f) {
     const auto& o = f.orientation;
     return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && std::isfinite(o.a) &&
            std::isfinite(o.b) && std::isfinite(o.c);
+}
+
+std::string positionText(const Eigen::Isometry3d& pose) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f)", pose.translation().x(),
+                  pose.translation().y(), pose.translation().z());
+    return buf;
 }
 
 }  // namespace pnp::ua::spatial

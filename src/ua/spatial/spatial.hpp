@@ -6,6 +6,7 @@
 
 #include <Eigen/Geometry>
 #include <optional>
+#include <string>
 
 #include "ua/types/ns0_types_model.hpp"
 
@@ -19,5 +20,8 @@ ThreeDVector toThreeDVector(const Eigen::Vector3d& v);
 
 // True when every number of the frame is finite.
 bool finite(const ThreeDFrame& frame);
+
+// "(x, y, z)" of a pose's position in metres to the millimetre, for messages and logs.
+std::string positionText(const Eigen::Isometry3d& pose);
 
 }  // namespace pnp::ua::spatial
