@@ -34,6 +34,7 @@
 #include "skill/detector/skill_detector.hpp"
 #include "skill/model/model.hpp"
 #include "support/child_process.hpp"
+#include "support/shell.hpp"
 #include "ua/client/client.hpp"
 #include "ua/spatial/spatial.hpp"
 #include "ua/types/extension_object.hpp"
@@ -91,9 +92,7 @@ proc:faults-3 a pnp:Step ; pnp:process proc:faults ; pnp:index 3 ;
 )";
 constexpr const char* kPickPlaceStep = "step 2 (pick the green cube and place it at place B)";
 
-std::string tmpPath(const std::string& name) {
-    return ::testing::TempDir() + "pnp_cellfaults_" + std::to_string(::getpid()) + "_" + name;
-}
+std::string tmpPath(const std::string& name) { return pnp::testing::tmpPath("cellfaults", name); }
 
 double secondsSince(Clock::time_point t) {
     return std::chrono::duration<double>(Clock::now() - t).count();

@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "support/child_process.hpp"
+#include "support/shell.hpp"
 
 #ifndef PNP_BINARY
 #error "PNP_BINARY must be defined"
@@ -31,9 +32,7 @@ using pnp::testing::ChildProcess;
 
 const std::string kPnp = PNP_BINARY;
 
-std::string tmpPath(const std::string& name) {
-    return ::testing::TempDir() + "pnp_cellrun_" + std::to_string(::getpid()) + "_" + name;
-}
+std::string tmpPath(const std::string& name) { return pnp::testing::tmpPath("cellrun", name); }
 
 // The PIDs of the processes whose parent is `parent` (from /proc).
 std::set<pid_t> childrenOf(pid_t parent) {
