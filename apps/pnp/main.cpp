@@ -22,7 +22,7 @@ std::function<int()> addSimCommands(CLI::App& app);
 std::function<int()> addDeviceCommands(CLI::App& app);
 std::function<int()> addRobotCommands(CLI::App& app);
 std::function<int()> addComponentCommands(CLI::App& app);  // toolchanger_commands.cpp
-std::function<int()> addPickPlaceCommand(CLI::App& app);    // pickplace_commands.cpp
+std::function<int()> addPickPlaceCommand(CLI::App& app);   // pickplace_commands.cpp
 std::function<int()> addCellCommands(CLI::App& app);       // cell_commands.cpp
 std::function<int()> addMesCommands(CLI::App& app);        // mes_commands.cpp
 }  // namespace pnp::cli
@@ -75,7 +75,9 @@ int main(int argc, char** argv) {
         "(docs/middleware_bench.md), `pnp sim --help`, `pnp device ur --help` and `pnp robot "
         "square --help` for the simulated robot cell (README, docs/ur-real-robot.md), `pnp "
         "device robotiq|ecbpi|wsg|kelvin-adc --help` and `pnp component toolchanger --help` "
-        "for its tools (README \"Tools that plug in\").");
+        "for its tools (README \"Tools that plug in\"), `pnp cell run --help` for the main job, "
+        "`pnp mes --help` and `pnp component pick-place --help` for the process and its skills "
+        "(docs/kb-vocabulary.md).");
 
     std::uint16_t ldsPort = 4840;
     std::string ldsHost = "0.0.0.0";
