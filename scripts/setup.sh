@@ -30,6 +30,8 @@ PACKAGES=(
     clang-19 libclang-rt-19-dev
     # libraries
     libasio-dev libpugixml-dev libssl-dev libfmt-dev libspdlog-dev libcli11-dev
+    # the openssl command line: the independent peer of the crypto and PKI tests
+    openssl
     nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev
     # robot kinematics and motion (src/kinematics, src/motion): KDL chains from DH tables or
     # URDF, Eigen for poses
@@ -53,6 +55,9 @@ PACKAGES=(
     # the knowledge base (src/kb, docs/knowledge-base.md): Turtle parsing (serd), the SPARQL
     # endpoint client (libcurl), and Virtuoso, the real SPARQL server tests/kb runs against
     libserd-dev libcurl4-openssl-dev virtuoso-opensource
+    # the live dashboard (src/dashboard, web/dashboard): HTTP + WebSocket server (websocketpp
+    # on standalone asio) and the headless browser its page is tested in (puppeteer-core)
+    libwebsocketpp-dev chromium
 )
 
 # Node.js: the machine image ships nodesource's nodejs (which bundles npm and

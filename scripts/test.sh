@@ -44,6 +44,14 @@ step_result() { # NAME STATUS DETAIL
     STEPS+=("$(printf '%-34s %-5s %s' "$1" "$2" "${3:-}")")
 }
 
+# Every pnp process the tests start takes its certificate from one PKI folder of this run
+# (secure by default, docs/security.md): fresh for each run, never the user's own folder.
+export PNP_PKI="$ROOT/build-logs/pki"
+rm -rf "$PNP_PKI"
+# Test artifacts kept with the logs: the dashboard's screenshots (tests/dashboard).
+export PNP_ARTIFACT_DIR="$ROOT/build-logs/artifacts"
+rm -rf "$PNP_ARTIFACT_DIR"
+
 # Sanitizer run-time settings for everything started from here (ctest, fuzzers).
 export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1:check_initialization_order=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"

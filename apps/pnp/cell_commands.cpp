@@ -4,6 +4,8 @@
 #include <time.h>
 
 #include <CLI/CLI.hpp>
+#include <cstdlib>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <stop_token>
@@ -24,26 +26,18 @@ struct CellCliOptions {
     int ldsPollMs = 5;
     int startTimeoutMs = 30000;
     int processTimeoutMs = 150000;
+    SecurityOptions security;
 };
 
 // Runs `body` with a stop token requested on SIGINT / SIGTERM (blocked in every thread; a
 // thread of ours waits for them). A second signal is not needed: the runner stops its
 // children within their grace time.
 int withStopSignals(const std::function<int(std::stop_token)>& body) {
-    const sigset_t signals = blockStopSignals();
-    std::stop_source stop;
-    std::jthread waiter([&stop, signals](std::stop_token own) {
-        const timespec slice{0, 100'000'000};
-        while (!own.stop_requested()) {
-            const int sig = ::sigtimedwait(&signals, nullptr, &slice);
-            if (sig == SIGINT || sig == SIGTERM) {
-                std::cerr << "pnp cell: " << (sig == SIGINT ? "SIGINT" : "SIGTERM")
-                          << ", stopping everything it started" << std::endl;
-                stop.request_stop();
-            }
-        }
+    StopOnSignal stop([](int sig) {
+        std::cerr << "pnp cell: " << (sig == SIGINT ? "SIGINT" : "SIGTERM")
+                  << ", stopping everything it started" << std::endl;
     });
-    return body(stop.get_token());
+    return body(stop.token());
 }
 
 int runCellCommand(CellCliOptions& o, bool up) {
@@ -57,6 +51,11 @@ int runCellCommand(CellCliOptions& o, bool up) {
     c.ldsPoll = std::chrono::milliseconds(o.ldsPollMs);
     c.startTimeout = std::chrono::milliseconds(o.startTimeoutMs);
     c.processTimeout = std::chrono::milliseconds(o.processTimeoutMs);
+    // The cell provisions its security: every child gets its certificate from one folder and
+    // trusts the others through it (docs/security.md); the runner's own clients too.
+    const std::filesystem::path pki = std::filesystem::absolute(pkiFolder(o.security));
+    ::setenv("PNP_PKI", pki.c_str(), 1);
+    secureClients(o.security);
     return withStopSignals(
         [&](std::stop_token stop) { return up ? cell::upCell(c, stop) : cell::runCell(c, stop); });
 }
@@ -90,6 +89,13 @@ void addCommonOptions(CLI::App* cmd, CellCliOptions& o) {
                     "an extra argument of `pnp component pick-place` (repeatable)")
         ->allow_extra_args(false);
     cmd->add_flag("--quiet", o.cell.quiet, "no progress lines");
+    cmd->add_flag("!--no-dashboard", o.cell.dashboard, "no live web dashboard (`pnp dashboard`)");
+    cmd->add_option("--dashboard-port", o.cell.dashboardPort,
+                    "the dashboard's HTTP port (a free one when it is taken)")
+        ->capture_default_str();
+    cmd->add_option("--pki", o.security.pki,
+                    "the PKI folder of every process of the cell (default: the machine's, "
+                    "$PNP_PKI or ~/.local/share/pnp/pki): they trust each other through it");
 }
 
 }  // namespace

@@ -32,12 +32,14 @@ using uac::AttributeId;
 // ---- connection --------------------------------------------------------------------------
 uac::ClientConfig clientConfig(const ClientOptions& o) {
     uac::ClientConfig c;
-    c.applicationName = "pnp cli";
-    c.applicationUri = "urn:pnp:cli";
+    c.applicationName = kCliApplicationName;
+    c.applicationUri = cliApplicationUri();
     c.requestTimeout = std::chrono::milliseconds(o.timeoutMs);
     c.connectTimeout = std::chrono::milliseconds(o.timeoutMs);
     c.closeTimeout = std::chrono::milliseconds(std::min(o.timeoutMs, 1000));
     c.reconnect.enabled = false;  // one-shot commands: fail fast and say why
+    c.security = clientSecurity(o.security);
+    c.useDefaultSecurity = false;  // --insecure means None
     return c;
 }
 
@@ -50,6 +52,10 @@ std::unique_ptr<uac::Client> connect(const ClientOptions& o, bool reconnect = fa
     if (!o.user.empty()) {
         auto [name, password] = splitUser(o.user);
         identity = uac::UserName{name, password};
+    }
+    if (auto user = userCertificate(o.security)) {
+        if (!o.user.empty()) throw UsageError("--user and --user-cert exclude each other");
+        identity = std::move(*user);
     }
     client->connect(o.url, identity);
     return client;

@@ -7,8 +7,12 @@
 
 #include <cstdint>
 #include <functional>
+#include <stop_token>
 #include <string>
+#include <thread>
 #include <vector>
+
+#include "security_options.hpp"
 
 namespace CLI {
 class App;
@@ -33,6 +37,8 @@ struct DiscoveryOptions {
     // register interval before it died, and is gone everywhere within 2 s.
     int expiryMs = 1800;
     int registerIntervalMs = 500;  // re-registration period
+    // How the server is secured (and its own connections): docs/security.md.
+    SecurityOptions security;
 };
 
 struct ServeOptions {
@@ -54,6 +60,7 @@ struct ClientOptions {
     bool json = false;
     int timeoutMs = 10000;
     std::string user;  // NAME:PASSWORD, empty: anonymous
+    SecurityOptions security;
 };
 
 struct BrowseOptions {
@@ -112,13 +119,14 @@ struct DiscoverOptions {
 struct SkillsOptions {
     bool json = false;
     bool once = false;
-    int durationMs = 0;             // 0: until Ctrl-C (--once: 2000)
+    int durationMs = 0;             // 0: until Ctrl-C (--once: until examined, docs/skills.md)
     std::vector<std::string> lds;   // LDS-MEs polled in addition to mDNS
     std::vector<std::string> urls;  // servers examined directly (no discovery needed)
     bool noMdns = false;
     std::vector<std::string> mdnsInterfaces;
     int mdnsPort = 5353;
     std::string type;  // only skills of this type (or a subtype)
+    SecurityOptions security;
 };
 
 // `pnp skill run URL|TYPE [name=value ...]`: runs one skill and prints its transitions.
@@ -133,6 +141,7 @@ struct SkillRunOptions {
     int mdnsPort = 5353;
     int discoverMs = 3000;  // how long to look for a skill of TYPE
     int repeat = 1;         // runs in a row on one connection (a soak test: a summary only)
+    SecurityOptions security;
 };
 // Exit code of a run that ended Failed, Aborted or timed out.
 inline constexpr int kExitSkillFailed = 3;
@@ -157,6 +166,21 @@ std::function<int()> addGripperDeviceCommands(CLI::App* device);
 // Blocks SIGINT and SIGTERM in the calling thread (call before any thread exists: every
 // thread inherits the mask) and returns them, for sigwait() / sigtimedwait().
 sigset_t blockStopSignals();
+
+// SIGINT / SIGTERM as a stop request: blocks them (construct before any thread exists) and a
+// thread of its own takes them, calling onSignal (if any) for each. For commands that end
+// what they are doing cleanly on Ctrl-C (halt a skill, stop a cell's children).
+class StopOnSignal {
+  public:
+    explicit StopOnSignal(std::function<void(int signal)> onSignal = {});
+    std::stop_token token() const { return stop_.get_token(); }
+
+  private:
+    sigset_t signals_;
+    std::stop_source stop_;
+    std::function<void(int)> onSignal_;
+    std::jthread watcher_;  // last: stopped and joined first
+};
 
 // "NAME:PASSWORD" -> {NAME, PASSWORD}; throws UsageError.
 std::pair<std::string, std::string> splitUser(const std::string& text);

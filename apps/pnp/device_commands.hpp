@@ -53,10 +53,13 @@ void waitForStopSignal(const sigset_t& stopSignals, const std::string& who);
 template <class Make, class Started>
 int serveUntilStopped(const ServeOptions& serve, const sigset_t& stopSignals,
                       const std::string& who, Make make, Started started) {
-    ua::server::Server server(serverConfig(serve));
+    ua::server::ServerConfig config = serverConfig(serve);
+    applyUsers(config, serve.discovery.security, true);
+    ua::server::Server server(config);
     decltype(make(server)) object;
     try {
         object = make(server);
+        finishServerSecurity(server, serve.discovery.security);
         server.start();
         if constexpr (requires { object->start(); }) object->start();
     } catch (const std::exception& e) {

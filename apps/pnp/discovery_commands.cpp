@@ -84,6 +84,8 @@ void applyDiscoveryConfig(ua::server::ServerConfig& config, const DiscoveryOptio
     d.discoveryGroup = o.group;
     d.discoveryLevel = o.level >= 0 ? o.level : (lds ? 0 : 1);
     d.registrationExpiry = std::chrono::milliseconds(o.expiryMs);
+    // Secure by default; an ApplicationUri made from the pid lives as long as the process.
+    secureServer(config, o.security, o.applicationUri.empty() && config.port == 0);
 }
 
 MdnsScope mdnsScope(const std::string& host, const std::vector<std::string>& mdnsInterfaces) {
@@ -156,8 +158,10 @@ int runLds(std::uint16_t port, const std::string& host, const DiscoveryOptions& 
     config.port = port;
     config.applicationName = "pnp LDS-ME";
     applyDiscoveryConfig(config, o, true);
+    applyUsers(config, o.security, true);
     server::Server server(config);
     try {
+        finishServerSecurity(server, o.security);
         server.start();
     } catch (const std::exception& e) {
         std::cerr << "error: cannot listen on " << host << ":" << port << ": " << e.what() << "\n";
@@ -331,6 +335,7 @@ void addDiscoveryOptions(CLI::App* cmd, DiscoveryOptions& o, bool lds) {
     cmd->add_option("--register-interval", o.registerIntervalMs, "re-register every MS ms")
         ->capture_default_str()
         ->check(CLI::Range(10, 3600000));
+    addServerSecurityOptions(cmd, o.security);
 }
 
 }  // namespace pnp::cli

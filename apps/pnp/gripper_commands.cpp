@@ -149,8 +149,12 @@ int runGripperAdapter(const std::string& command, gripper::GripperHardware& hard
         config.publicHost = ::gethostname(buf, sizeof buf - 1) == 0 ? buf : "localhost";
     }
 
+    applyUsers(config, o.serve.discovery.security, true);
     gripper::ToolAdapterOptions to;
     to.server = config;
+    to.prepareServer = [&security = o.serve.discovery.security](ua::server::Server& s) {
+        finishServerSecurity(s, security);
+    };
     to.device.name = name;
     to.device.speed = o.speed;
     to.pollPeriod = std::chrono::milliseconds(o.pollMs);

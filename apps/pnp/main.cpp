@@ -25,6 +25,9 @@ std::function<int()> addComponentCommands(CLI::App& app);  // toolchanger_comman
 std::function<int()> addPickPlaceCommand(CLI::App& app);   // pickplace_commands.cpp
 std::function<int()> addCellCommands(CLI::App& app);       // cell_commands.cpp
 std::function<int()> addMesCommands(CLI::App& app);        // mes_commands.cpp
+std::function<int()> addPkiCommands(CLI::App& app);        // pki_commands.cpp
+std::function<int()> addUserCommands(CLI::App& app);       // user_commands.cpp
+std::function<int()> addDashboardCommand(CLI::App& app);   // dashboard_commands.cpp
 }  // namespace pnp::cli
 
 namespace {
@@ -46,6 +49,7 @@ void addClientOptions(CLI::App* cmd, ClientOptions& o) {
         ->capture_default_str()
         ->check(CLI::Range(1, 3600000));
     cmd->add_option("--user", o.user, "user name identity NAME:PASSWORD (default: anonymous)");
+    addClientSecurityOptions(cmd, o.security);
 }
 
 int uaError(const pnp::ua::client::Error& e, bool json) {
@@ -136,8 +140,10 @@ int main(int argc, char** argv) {
     CLI::App* skillsCmd = app.add_subcommand(
         "skills", "list the skills on the network as they come and go (skill detector)");
     skillsCmd->add_flag("--json", skillsListOpts.json, "one JSON object per line (--once: a list)");
+    addConnectionSecurityOptions(skillsCmd, skillsListOpts.security);
     skillsCmd->add_flag("--once", skillsListOpts.once,
-                        "print the skills found within --duration (default 2000) and exit");
+                        "print the skills found and exit: after --duration MS, or (default) once "
+                        "every server discovered within 2 s has been examined (15 s at most)");
     skillsCmd->add_option("--duration", skillsListOpts.durationMs, "stop after MS ms (0: Ctrl-C)");
     skillsCmd->add_option("--type", skillsListOpts.type,
                           "only skills of this type or a subtype (e.g. GripperSkillType)");
@@ -181,6 +187,7 @@ int main(int argc, char** argv) {
         ->capture_default_str()
         ->check(CLI::Range(1, 1000000));
     skillRun->add_option("--lds", skillRunOpts.lds, "look for TYPE at this LDS-ME too");
+    addConnectionSecurityOptions(skillRun, skillRunOpts.security);
     skillRun->add_flag("--no-mdns", skillRunOpts.noMdns, "no multicast (with --lds)");
     skillRun->add_option("--mdns-port", skillRunOpts.mdnsPort, "mDNS UDP port")
         ->capture_default_str()
@@ -190,8 +197,9 @@ int main(int argc, char** argv) {
                      "how long to look for a skill of TYPE, ms")
         ->capture_default_str();
     skillRun->footer(
+        "Ctrl-C (SIGINT) or SIGTERM during the run halts the skill and unlocks it.\n"
         "Exit codes: 0 Completed, 1 OPC UA error, 2 usage error, 3 Failed / Aborted / timed "
-        "out (halted).\n"
+        "out / interrupted (halted).\n"
         "Example: pnp skill run opc.tcp://127.0.0.1:4840 --skill MoveGripper Width=0.02");
 
     CLI::App* ua =
@@ -312,6 +320,9 @@ int main(int argc, char** argv) {
     const auto runPickPlace = addPickPlaceCommand(app);
     const auto runCell = addCellCommands(app);
     const auto runMes = addMesCommands(app);
+    const auto runPki = addPkiCommands(app);
+    const auto runUser = addUserCommands(app);
+    const auto runDashboard = addDashboardCommand(app);
 
     try {
         app.parse(argc, argv);
@@ -333,6 +344,9 @@ int main(int argc, char** argv) {
         if (const int rc = runPickPlace(); rc >= 0) return rc;
         if (const int rc = runCell(); rc >= 0) return rc;
         if (const int rc = runMes(); rc >= 0) return rc;
+        if (const int rc = runPki(); rc >= 0) return rc;
+        if (const int rc = runUser(); rc >= 0) return rc;
+        if (const int rc = runDashboard(); rc >= 0) return rc;
         if (*serve) return runServe(serveOpts);
         if (*demoSkills) return runServe(skillsOpts);
         if (*skillsCmd) return runSkills(skillsListOpts);

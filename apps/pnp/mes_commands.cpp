@@ -42,6 +42,7 @@ struct MesRunOptions {
     std::string mes = "opc.tcp://127.0.0.1:4860";
     int timeoutS = 1800;
     bool json = false;
+    SecurityOptions security;
 };
 
 int runMes(MesCliOptions& o) {
@@ -82,6 +83,7 @@ int runMes(MesCliOptions& o) {
 int runMesProcess(const MesRunOptions& o) {
     using namespace std::chrono;
     const auto deadline = steady_clock::now() + seconds(o.timeoutS);
+    secureClients(o.security);
     skill::detector::DetectorConfig config;
     config.useDiscovery = false;
     skill::detector::SkillDetector detector(nullptr, config);
@@ -181,6 +183,7 @@ std::function<int()> addMesCommands(CLI::App& app) {
     run->add_option("--timeout", r->timeoutS, "halt the process after S seconds")
         ->capture_default_str();
     run->add_flag("--json", r->json, "print the execution record as JSON");
+    addConnectionSecurityOptions(run, r->security);
     return [o, r, cmd, run]() -> int {
         if (!*cmd) return -1;
         if (*run) return runMesProcess(*r);

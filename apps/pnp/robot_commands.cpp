@@ -54,6 +54,7 @@ struct SquareOptions {
     bool noMdns = false;
     int mdnsPort = 5353;
     bool json = false;
+    SecurityOptions security;
 };
 
 std::vector<double> parseNumbers(const std::string& text, std::size_t count, const char* what) {
@@ -97,6 +98,7 @@ int runSquare(SquareOptions& o) {
     if (!byUrl && o.target != "auto") throw UsageError("TARGET is opc.tcp://HOST:PORT or auto");
     if (!(o.size > 0.0 && o.size <= 1.0)) throw UsageError("--size must be within (0, 1] m");
     if (!(o.speed > 0.0 && o.speed <= 1.0)) throw UsageError("--speed must be within (0, 1] m/s");
+    secureClients(o.security);
 
     // 1. The robot's move skills, by type, on one component.
     std::unique_ptr<mdns::Mdns> mdns;
@@ -377,6 +379,7 @@ std::function<int()> addRobotCommands(CLI::App& app) {
     square->add_option("--discover", o->discoverMs, "auto: how long to look for the robot, ms")
         ->capture_default_str();
     square->add_option("--lds", o->lds, "auto: also poll this LDS-ME (repeatable)");
+    addConnectionSecurityOptions(square, o->security);
     square->add_flag("--no-mdns", o->noMdns, "auto: no multicast, --lds only");
     square->add_option("--mdns-port", o->mdnsPort, "mDNS UDP port")->capture_default_str();
     square->add_flag("--json", o->json, "print one JSON object");

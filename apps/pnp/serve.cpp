@@ -18,6 +18,7 @@
 #include "ua/server/nodeset_xml.hpp"
 #include "ua/server/server.hpp"
 #include "ua/types/ns0_ids_objects.hpp"
+#include "ua/types/status_codes.hpp"
 
 namespace pnp::cli {
 
@@ -28,6 +29,20 @@ sigset_t blockStopSignals() {
     sigaddset(&set, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &set, nullptr);
     return set;
+}
+
+StopOnSignal::StopOnSignal(std::function<void(int)> onSignal)
+    : signals_(blockStopSignals()), onSignal_(std::move(onSignal)) {
+    watcher_ = std::jthread([this](std::stop_token done) {
+        const timespec tick{0, 100'000'000};
+        while (!done.stop_requested()) {
+            const int sig = sigtimedwait(&signals_, nullptr, &tick);
+            if (sig == SIGINT || sig == SIGTERM) {
+                if (onSignal_) onSignal_(sig);
+                stop_.request_stop();
+            }
+        }
+    });
 }
 
 std::pair<std::string, std::string> splitUser(const std::string& text) {
@@ -77,8 +92,10 @@ int runServe(const ServeOptions& o) {
         auto [name, password] = splitUser(u);
         users[name] = password;
     }
-    if (o.noAnonymous && users.empty())
-        throw UsageError("--no-anonymous needs at least one --user NAME:PASSWORD");
+    if (o.noAnonymous && users.empty() && o.discovery.security.users.empty())
+        throw UsageError("--no-anonymous needs at least one --user NAME:PASSWORD or --users FILE");
+    if (!o.discovery.security.users.empty() && !users.empty())
+        throw UsageError("--user and --users exclude each other");
 
     // Block the stop signals before any thread exists: every thread inherits the mask and
     // this thread takes them synchronously with sigwait().
@@ -87,9 +104,16 @@ int runServe(const ServeOptions& o) {
     server::ServerConfig config;
     config.host = o.host;
     config.port = o.port;
-    applyDiscoveryConfig(config, o.discovery, false);
-    config.accessControl =
-        std::make_shared<server::DefaultAccessControl>(!o.noAnonymous, std::move(users));
+    try {
+        applyDiscoveryConfig(config, o.discovery, false);
+    } catch (const ua::pki::PkiError& e) {
+        std::cerr << "error: PKI folder " << pkiFolder(o.discovery.security) << ": " << e.what()
+                  << "\n";
+        return kExitUaError;
+    }
+    if (!applyUsers(config, o.discovery.security, !o.noAnonymous))
+        config.accessControl =
+            std::make_shared<server::DefaultAccessControl>(!o.noAnonymous, std::move(users));
 
     server::Server server(config);
     // Declared after the server, so destroyed first: pending Demo.Sleep calls are completed
@@ -100,6 +124,7 @@ int runServe(const ServeOptions& o) {
         loadModels(server.addressSpace(), o);
         if (!o.skillController.empty())
             skills = pnp::skill::demo::addDemoSkills(server, o.skillController);
+        finishServerSecurity(server, o.discovery.security);
     } catch (const std::exception& e) {
         std::cerr << "error: " << e.what() << "\n";
         return kExitUaError;
@@ -122,8 +147,13 @@ int runServe(const ServeOptions& o) {
     }
     std::cerr << "pnp ua serve: namespace " << demo::kNamespaceUri
               << " is ns=" << demoNamespace.namespaceIndex() << "; anonymous "
-              << (o.noAnonymous ? "refused" : "allowed") << "; " << o.users.size() << " user(s); "
-              << discovery->status() << "; stop with Ctrl-C or SIGTERM" << std::endl;
+              << (o.noAnonymous ? "refused" : "allowed") << "; "
+              << (o.discovery.security.users.empty() ? std::to_string(o.users.size()) + " user(s)"
+                                                     : "users of " + o.discovery.security.users)
+              << (config.security
+                      ? "; secured endpoints (PKI " + pkiFolder(o.discovery.security) + ")"
+                      : "; SecurityPolicy None only")
+              << "; " << discovery->status() << "; stop with Ctrl-C or SIGTERM" << std::endl;
     if (skills)
         std::cerr << "pnp demo-skills: skill controller " << o.skillController
                   << " with the skills Delay, Grasp, Release, MoveGripper (models "

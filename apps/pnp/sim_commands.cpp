@@ -49,6 +49,7 @@ int runSim(SimOptions& o) {
     sc.bindAddress = o.deviceHost;
     sc.ephemeralPorts = o.ephemeral;
     sc.snapshotRate = std::min(o.truthRate, o.rate);
+    sc.log = [](const std::string& line) { std::cerr << "pnp sim: " + line + "\n" << std::flush; };
     sim::cell::Simulator simulator(std::move(cell).value(), sc);
 
     ua::server::ServerConfig config;
@@ -57,8 +58,10 @@ int runSim(SimOptions& o) {
     if (o.serve.discovery.name.empty())
         o.serve.discovery.name = "pnp sim " + simulator.description().name;
     applyDiscoveryConfig(config, o.serve.discovery, false);
+    applyUsers(config, o.serve.discovery.security, true);
     ua::server::Server server(config);
     sim::cell::GroundTruth truth(server, simulator, {.rate = o.truthRate});
+    finishServerSecurity(server, o.serve.discovery.security);
 
     try {
         simulator.start();
@@ -128,6 +131,7 @@ struct OperatorOptions {
     std::vector<double> rpy{0.0, 0.0, 0.0};
     std::string object;
     std::string robot = "ur5";
+    SecurityOptions security;
 };
 
 int runOperator(const OperatorOptions& o) {
@@ -145,6 +149,7 @@ int runOperator(const OperatorOptions& o) {
         inputs.emplace_back(ua::toExtensionObject(ua::spatial::toFrame(pose)));
     }
     try {
+        secureClients(o.security);
         ua::client::Client client;
         client.connect(o.world, ua::client::Anonymous{}, deadline);
         const ua::UInt16 ns = client.namespaceIndex(sim::cell::kWorldNamespaceUri, deadline);
@@ -208,6 +213,7 @@ std::function<int()> addSimCommands(CLI::App& app) {
         c->add_option("--world", op->world, "the ground truth server of `pnp sim`")
             ->capture_default_str();
         c->add_option("--timeout", op->timeoutMs, "ms")->capture_default_str();
+        addConnectionSecurityOptions(c, op->security);
     };
     CLI::App* tool = cmd->add_subcommand("tool", "an operator's hands on the tools");
     tool->require_subcommand(1);

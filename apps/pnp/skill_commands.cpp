@@ -1,6 +1,7 @@
 // `pnp skills` and `pnp skill run` (docs/skills.md): the skill detector and the generic skill
 // client on the command line.
 #include <signal.h>
+#include <time.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -8,7 +9,9 @@
 #include <iostream>
 #include <map>
 #include <mutex>
+#include <stop_token>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "commands.hpp"
@@ -24,6 +27,7 @@ namespace pnp::cli {
 namespace {
 
 using skill::detector::DetectedSkill;
+using skill::detector::ServerState;
 using skill::detector::SkillDetector;
 
 Json toJson(const DetectedSkill& s) {
@@ -75,6 +79,25 @@ void waitForStop(const sigset_t& stopSignals, int durationMs) {
     }
 }
 
+// `pnp skills --once` without --duration: discovery has had time to list the servers (2 s)
+// and none of them is still being examined — a secured connect on a loaded machine can take
+// longer than the 2 s a fixed wait allowed — within 15 s at most, or until Ctrl-C.
+void waitUntilSettled(const SkillDetector& detector, const sigset_t& stopSignals) {
+    using namespace std::chrono;
+    const auto t0 = steady_clock::now();
+    const auto settled = [&] {
+        if (steady_clock::now() - t0 < 2s) return false;
+        const auto servers = detector.servers();
+        return std::none_of(servers.begin(), servers.end(), [](const ServerState& s) {
+            return s.status == ServerState::Status::Examining;
+        });
+    };
+    for (int i = 0; i < 150 && !settled(); ++i) {
+        timespec ts{0, 100'000'000L};
+        if (sigtimedwait(&stopSignals, nullptr, &ts) > 0) return;
+    }
+}
+
 std::string stateName(skill::ProgramState s) { return std::string(skill::toString(s)); }
 
 }  // namespace
@@ -85,6 +108,7 @@ int runSkills(const SkillsOptions& o) {
     if (!o.type.empty()) only = typeOrThrow(o.type);
     if (o.noMdns && o.lds.empty() && o.urls.empty())
         throw UsageError("--no-mdns needs an --lds or --url");
+    secureClients(o.security);
     std::unique_ptr<mdns::Mdns> mdns;
     try {
         mdns = startMdns(o.noMdns, o.mdnsInterfaces, o.mdnsPort, !o.lds.empty() || !o.urls.empty(),
@@ -116,7 +140,10 @@ int runSkills(const SkillsOptions& o) {
     });
     detector.start();
     for (const auto& url : o.urls) detector.addServer(url);
-    waitForStop(stopSignals, o.durationMs > 0 ? o.durationMs : (o.once ? 2000 : 0));
+    if (o.once && o.durationMs <= 0)
+        waitUntilSettled(detector, stopSignals);
+    else
+        waitForStop(stopSignals, o.durationMs);
     auto skills = only ? detector.find(*only) : detector.all();
     detector.stop();
     if (o.once) {
@@ -144,16 +171,16 @@ namespace {
 // the command's, which also covered finding the skill), then a summary.
 int repeatRuns(const SkillRunOptions& o, const DetectedSkill& target,
                skill::client::GenericSkillClient& skill, const skill::client::NamedValues& params,
-               std::chrono::steady_clock::time_point firstDeadline) {
+               std::chrono::steady_clock::time_point firstDeadline, std::stop_token cancel) {
     using namespace std::chrono;
     std::map<std::string, int> results;  // Completed / Failed / Aborted / TimedOut / ...
     std::vector<double> ms;
     ms.reserve(static_cast<std::size_t>(o.repeat));
     std::string firstProblem;
-    for (int i = 0; i < o.repeat; ++i) {
+    for (int i = 0; i < o.repeat && !cancel.stop_requested(); ++i) {
         const auto t0 = steady_clock::now();
         const auto deadline = i == 0 ? firstDeadline : t0 + milliseconds(o.timeoutMs);
-        skill::client::RunResult r = skill.run(params, deadline);
+        skill::client::RunResult r = skill.run(params, deadline, cancel);
         ms.push_back(duration<double, std::milli>(steady_clock::now() - t0).count());
         const std::string result = r.timedOut ? "TimedOut" : std::string(skill::toString(r.result));
         ++results[result];
@@ -168,10 +195,12 @@ int repeatRuns(const SkillRunOptions& o, const DetectedSkill& target,
     };
     const double median =
         ms.size() % 2 ? ms[ms.size() / 2] : (ms[ms.size() / 2 - 1] + ms[ms.size() / 2]) / 2;
+    if (ms.empty()) return kExitSkillFailed;  // interrupted before the first run
+    const int runs = static_cast<int>(ms.size());
     const bool ok = results["Completed"] == o.repeat;
     if (o.json) {
         Json j = toJson(target);
-        j["runs"] = o.repeat;
+        j["runs"] = runs;
         Json counts = Json::object();
         for (const auto& [name, n] : results)
             if (n > 0) counts[name] = n;
@@ -180,7 +209,7 @@ int repeatRuns(const SkillRunOptions& o, const DetectedSkill& target,
         if (!firstProblem.empty()) j["firstProblem"] = firstProblem;
         std::cout << j.dump(2) << std::endl;
     } else {
-        std::cout << o.repeat << " runs:";
+        std::cout << runs << " runs:";
         const char* sep = " ";
         for (const auto& [name, n] : results)
             if (n > 0) {
@@ -203,9 +232,13 @@ int repeatRuns(const SkillRunOptions& o, const DetectedSkill& target,
 
 int runSkillRun(const SkillRunOptions& o) {
     using namespace std::chrono;
+    // Ctrl-C (or a supervisor's SIGTERM) halts the skill and unlocks it instead of leaving
+    // the robot moving under a lock nobody renews.
+    StopOnSignal interrupt;
     const bool byUrl = o.target.starts_with("opc.tcp://");
     std::optional<skill::ModelNode> type;
     if (!byUrl) type = typeOrThrow(o.target);
+    secureClients(o.security);
     const auto deadline = steady_clock::now() + milliseconds(o.timeoutMs);
 
     // Find the skill: on the given server, or by type on the network.
@@ -271,8 +304,8 @@ int runSkillRun(const SkillRunOptions& o) {
     if (!o.json)
         std::cout << "running " << target.controllerName << "/" << target.name << " ("
                   << target.type.name << ") on " << target.endpointUrl << std::endl;
-    if (o.repeat > 1) return repeatRuns(o, target, skill, params, deadline);
-    skill::client::RunResult r = skill.run(params, deadline);
+    if (o.repeat > 1) return repeatRuns(o, target, skill, params, deadline, interrupt.token());
+    skill::client::RunResult r = skill.run(params, deadline, interrupt.token());
 
     const bool ok = r.result == skill::SkillResult::Completed && !r.timedOut;
     if (o.json) {

@@ -45,6 +45,21 @@ double msSince(Clock::time_point from, Clock::time_point to) {
 // endpoint is then printed at start, not at the first power-up). An address of another
 // network namespace (--netns: a device's own) is not ours to bind: any port is free in that
 // fresh namespace, so one of ours is taken as the number.
+// Whether `port` on `host` can be bound now (SO_REUSEADDR, as a server binds).
+bool portFree(const std::string& host, unsigned short port) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) return false;
+    const int one = 1;
+    ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(port);
+    const bool ok = ::inet_pton(AF_INET, host.c_str(), &a.sin_addr) == 1 &&
+                    ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+    ::close(fd);
+    return ok;
+}
+
 unsigned short freePort(const std::string& host) {
     auto tryBind = [](const std::string& address) -> unsigned short {
         const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
@@ -151,7 +166,7 @@ struct Cell::Impl {
     std::unique_ptr<detector::SkillDetector> detector;
     World world;
     std::string host = "127.0.0.1";  // where the runner reaches the cell (loopback / bus)
-    std::string lds, mes, worldUrl;
+    std::string lds, mes, worldUrl, dashboardUrl;
     std::string mdnsPort;
     json sim;                                               // the sim's JSON line
     std::vector<std::pair<std::string, std::string>> urls;  // child -> URL
@@ -219,6 +234,34 @@ struct Cell::Impl {
     ChildProcess& spawn(const std::string& name, const std::vector<std::string>& argv) {
         checkStop();
         return supervisor.start(name, argv, netnsOf(name));
+    }
+
+    // `pnp dashboard`, a client of the cell bus and the world, in the runner's own network
+    // (the page is opened from this machine). One that does not come up is a problem of the
+    // run, the cell runs on without it.
+    void startDashboard() {
+        unsigned short port = options.dashboardPort;
+        if (port != 0 && !portFree(host, port)) {
+            say("port " + std::to_string(port) + " is taken: the dashboard takes a free one");
+            port = 0;
+        }
+        const std::vector<std::string> argv = {
+            options.pnp.string(), "dashboard", "--host", host,      "--port",
+            std::to_string(port), "--lds",     lds,      "--world", worldUrl,
+            "--no-mdns"};
+        auto& child = supervisor.start("dashboard", argv, "");
+        try {
+            const auto line = waitLine(child, "dashboard on ");
+            dashboardUrl = line.text.substr(std::string("dashboard on ").size());
+        } catch (const CellError& e) {
+            checkStop();
+            problems.push_back("dashboard did not come up: " + std::string(e.what()) + " (log " +
+                               child.logFile().string() + ")");
+            neverUp.insert("dashboard");
+            return;
+        }
+        urls.emplace_back("dashboard", dashboardUrl);
+        say("dashboard " + dashboardUrl + " (open it in a browser: the cell live)");
     }
 
     // A line of the child's stdout, in slices so that a stop request is seen.
@@ -484,6 +527,7 @@ struct Cell::Impl {
         world.connect(worldUrl, Clock::now() + options.startTimeout);
         say("simulator: cell " + sim.value("cell", std::string()) + ", ground truth " + worldUrl);
         powerWatch = std::jthread([this](std::stop_token st) { watchPower(st); });
+        if (options.dashboard) startDashboard();
 
         auto device = [&](const std::string& simDevice) -> const json* {
             for (const auto& d : sim.at("devices"))
@@ -700,6 +744,8 @@ std::vector<Detection> Cell::detections() const {
     return out;
 }
 std::vector<std::pair<std::string, std::string>> Cell::urls() const { return impl_->urls; }
+
+std::string Cell::dashboardUrl() const { return impl_->dashboardUrl; }
 std::map<std::string, std::string> Cell::logs() const {
     std::map<std::string, std::string> out;
     for (const auto* c : impl_->supervisor.children()) out[c->name()] = c->logFile().string();
@@ -750,6 +796,7 @@ json Cell::describe() const {
                 {"world", impl_->worldUrl},
                 {"children", std::move(children)}};
     if (!impl_->mes.empty()) out["mes"] = impl_->mes;
+    if (!impl_->dashboardUrl.empty()) out["dashboard"] = impl_->dashboardUrl;
     if (impl_->sim.is_object()) out["sim"] = impl_->sim;
     json problems = impl_->problems;
     out["problems"] = std::move(problems);

@@ -66,6 +66,10 @@ struct CellOptions {
     std::vector<std::string> pickPlaceArgs;            // ... of `pnp component pick-place`
     double toleranceMm = 1.0;
     bool quiet = false;  // no progress lines on stdout
+    // The live web dashboard (`pnp dashboard`), started right after the world so that the
+    // page shows the devices plugging in; on this port, or on a free one when it is taken.
+    bool dashboard = true;
+    unsigned short dashboardPort = 8080;
 };
 
 // The cell's processes and the runner's view of them. Not thread-safe; start() and the
@@ -88,6 +92,8 @@ class Cell {
     std::vector<ObjectPlacement> placements(const RoundReport& round);
     // Plug-in -> detection of every device, and of every tool power-up so far.
     std::vector<Detection> detections() const;
+    // The dashboard's page (http://HOST:PORT/), "" without one.
+    std::string dashboardUrl() const;
     // name -> URL of every server the runner started.
     std::vector<std::pair<std::string, std::string>> urls() const;
     std::map<std::string, std::string> logs() const;

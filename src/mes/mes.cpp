@@ -14,6 +14,7 @@
 #include "skill/client/generic_client.hpp"
 #include "skill/model/model.hpp"
 #include "skill/server/skill.hpp"
+#include "ua/types/ns0_ids_data_types.hpp"
 #include "ua/types/status_codes.hpp"
 
 namespace pnp::mes {
@@ -56,6 +57,8 @@ struct Mes::Impl {
     std::map<std::string, std::shared_ptr<ua::client::Client>> connections;  // by endpoint
     std::map<std::string, std::shared_ptr<GenericSkillClient>> clients;      // by skill IRI
     std::atomic<std::uint64_t> executions{0};
+    // The run as it goes, for clients (ExecuteProcess/CurrentStep and /Progress).
+    ua::NodeId currentStepNode, progressNode;
 
     Impl(ua::server::Server& s, std::shared_ptr<SharedKb> k, MesOptions o)
         : server(s), kb(std::move(k)), options(std::move(o)) {
@@ -181,6 +184,42 @@ struct Mes::Impl {
         }
     }
 
+    // ExecuteProcess/CurrentStep (the running step's index, 0 = none) and /Progress (the
+    // run so far as JSON: every step of the process, with its result once it ended) — what a
+    // client subscribes to while a process runs; the Record comes only at the end.
+    void publishProgress(const json& progress) {
+        if (progressNode.isNull()) return;
+        const json& r = progress["running"];
+        auto& space = server.addressSpace();
+        space.setValue(currentStepNode, ua::DataValue(ua::Variant(ua::UInt32{
+                                            r.is_number_integer() ? r.get<ua::UInt32>() : 0u})));
+        space.setValue(progressNode, ua::DataValue(ua::Variant(ua::String(progress.dump()))));
+    }
+
+    void addProgressNodes(const ua::NodeId& skillNode) {
+        auto& space = server.addressSpace();
+        const ua::UInt16 ns = skillNode.namespaceIndex();
+        const std::string base = skillNode.idType() == ua::IdType::String
+                                     ? skillNode.string()
+                                     : options.name + ".ExecuteProcess";
+        auto variable = [&](const std::string& name, ua::UInt32 dataType, ua::Variant initial,
+                            const std::string& what) {
+            ua::server::VariableAttributes a;
+            a.dataType = ua::NodeId(0, dataType);
+            a.value = ua::DataValue(std::move(initial));
+            a.accessLevel = ua::server::access_level::CurrentRead;  // the MES's, not clients'
+            a.description = ua::LocalizedText("", what);
+            return space.addVariable(skillNode, ua::NodeId(ns, base + "." + name),
+                                     ua::QualifiedName(ns, name), a);
+        };
+        currentStepNode = variable("CurrentStep", ua::ns0::UInt32, ua::Variant(ua::UInt32{0}),
+                                   "the index of the step running now; 0: none");
+        progressNode =
+            variable("Progress", ua::ns0::String, ua::Variant(ua::String("")),
+                     "the process run so far (JSON: execution, process, running, steps, result); "
+                     "empty before the first run");
+    }
+
     void finishRecord(json& record) {
         const std::string text = record.dump();
         {
@@ -206,7 +245,17 @@ struct Mes::Impl {
             "urn:pnp:kb:execution:" + std::to_string(ua::DateTime::now().toUnixNanos()) + "-" +
             std::to_string(executions.fetch_add(1));
         record["execution"] = execIri;
+        json progress = {{"execution", execIri},
+                         {"process", processIri},
+                         {"running", nullptr},
+                         {"steps", json::array()},
+                         {"result", nullptr}};
+        publishProgress(progress);
         auto end = [&](const std::string& result, const std::string& reason) {
+            progress["running"] = nullptr;
+            progress["result"] = result;
+            progress["reason"] = reason;
+            publishProgress(progress);
             record["result"] = result;
             record["reason"] = reason;
             record["end"] = ua::DateTime::now().toIso8601();
@@ -242,6 +291,12 @@ struct Mes::Impl {
         } catch (const std::exception& e) {
             return end("Refused", e.what());
         }
+        for (const Step& step : process.steps)
+            progress["steps"].push_back({{"index", step.index},
+                                         {"label", step.label},
+                                         {"skillType", localName(step.skillType)},
+                                         {"result", nullptr}});
+        publishProgress(progress);
         exec.progress(
             ua::Variant(ua::String("checking " + std::to_string(process.steps.size()) + " steps")));
         const auto problems = check(process);
@@ -252,7 +307,20 @@ struct Mes::Impl {
             return end("Refused", all);
         }
         ua::DateTime previousEnd{};
-        for (const Step& step : process.steps) {
+        for (std::size_t position = 0; position < process.steps.size(); ++position) {
+            const Step& step = process.steps[position];
+            json& shown = progress["steps"][position];
+            // The step's end, as the Record has it.
+            auto showEnd = [&](const json& s) {
+                for (const char* k :
+                     {"skill", "component", "componentName", "result", "message", "durationS"})
+                    if (s.contains(k)) shown[k] = s[k];
+                if (shown.contains("message") && shown["message"].is_string() &&
+                    shown["message"].get<std::string>().size() > 1000)
+                    shown["message"] = shown["message"].get<std::string>().substr(0, 1000) + "...";
+                progress["running"] = nullptr;
+                publishProgress(progress);
+            };
             if (exec.stopRequested())
                 return end("Halted", "halted before step " + std::to_string(step.index));
             const auto t0 = Clock::now();
@@ -282,6 +350,7 @@ struct Mes::Impl {
                 s["result"] = "Failed";
                 s["message"] = e.what();
                 record["steps"].push_back(s);
+                showEnd(s);
                 return end("Failed", what + ": " + e.what());
             }
             s["skill"] = choice->skill.name;
@@ -290,6 +359,11 @@ struct Mes::Impl {
             s["componentName"] = choice->skill.componentName;
             s["endpoint"] = choice->skill.endpointUrl;
             const std::string on = choice->skill.name + " on " + choice->skill.componentName;
+            shown["skill"] = s["skill"];
+            shown["component"] = s["component"];
+            shown["componentName"] = s["componentName"];
+            progress["running"] = step.index;
+            publishProgress(progress);
             exec.progress(ua::Variant(ua::String(what + ": " + on)));
             skill::client::RunResult rr;
             std::string error;
@@ -379,6 +453,7 @@ struct Mes::Impl {
             s["result"] = result;
             s["message"] = message;
             record["steps"].push_back(s);
+            showEnd(s);
             try {
                 recordStepInKb(execIri + "/step/" + std::to_string(step.index), step, s);
             } catch (const std::exception& e) {
@@ -440,11 +515,12 @@ Mes::Mes(ua::server::Server& server, std::shared_ptr<SharedKb> kb, MesOptions op
         auto impl = weak.lock();
         return impl ? impl->forward(false) : ua::StatusCode{};
     };
-    m.controller->add(
+    const auto handle = m.controller->add(
         "ExecuteProcess",
         skill::server::makeSkill(skill::types::ExecuteProcessSkillType,
                                  {skill::server::declareParameter<ua::String>("ProcessIri", "")},
                                  std::move(cb)));
+    m.addProgressNodes(handle.node());
     m.feed = std::make_unique<KbFeed>(*m.kb, m.options.requestTimeout);
     m.feed->log = m.options.log;
     m.detector = std::make_unique<skill::detector::SkillDetector>(mdns, m.options.detector);

@@ -8,8 +8,12 @@
 // step ends the process with the step, the skill and the reason. Every execution is recorded
 // in the knowledge base (graph urn:pnp:kb:executions) and as JSON (FinalResultData/Record,
 // and a line in options.recordFile); after each recorded step the knowledge base's pnp:Rule
-// updates run (e.g. which tool lives in which dock). Nothing process- or vendor-specific is
-// compiled in.
+// updates run (e.g. which tool lives in which dock). While a process runs, two read-only
+// variables of the ExecuteProcess skill tell clients where it is: CurrentStep (UInt32, the
+// running step's index, 0 = none) and Progress (String, JSON: {execution, process, running:
+// index|null, steps: [{index, label, skillType, skill?, component?, componentName?, result:
+// null until the step ended, message?, durationS?}], result: null until the end, reason?}).
+// Nothing process- or vendor-specific is compiled in.
 //
 //   auto kb = std::make_shared<SharedKb>(kb::open(""));
 //   loadKnowledge(*kb, defaultKnowledgeFiles(), deadline);

@@ -20,7 +20,11 @@
 namespace pnp::robot {
 
 struct ControllerConfig {
-    std::chrono::milliseconds readTimeout{100};  // no sample for this long = link lost
+    // No sample for this long = link lost: the motion fails and the loop reconnects. The
+    // robot itself is stopped by the controller's own watchdog when targets stop coming (the
+    // servo program's), so this only decides when to give up on the link; 250 ms rides out a
+    // loaded machine's scheduling stalls (100 ms did not, in CI runs of the whole cell).
+    std::chrono::milliseconds readTimeout{250};
     std::chrono::milliseconds reconnectDelay{500};
     // Used to brake when no trajectory is running (e.g. a position stream): rad/s².
     motion::JointLimits limits;

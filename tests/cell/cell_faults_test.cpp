@@ -34,6 +34,7 @@
 #include "skill/detector/skill_detector.hpp"
 #include "skill/model/model.hpp"
 #include "support/child_process.hpp"
+#include "support/machine_pki.hpp"
 #include "support/shell.hpp"
 #include "ua/client/client.hpp"
 #include "ua/spatial/spatial.hpp"
@@ -235,6 +236,7 @@ class CellFaults : public ::testing::Test {
         }
         for (const auto& c : cell_.at("children")) children_[c.at("name")] = c;
         try {
+            pnp::testing::useMachinePki();  // the cell's servers are secured
             world_ = std::make_unique<World>();
             world_->connect(cell_.at("world"));
             detector::DetectorConfig config;

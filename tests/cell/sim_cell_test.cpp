@@ -7,6 +7,8 @@
 #include <cmath>
 #include <mutex>
 #include <numbers>
+#include <optional>
+#include <set>
 #include <thread>
 
 #include "device/ur/ur_hardware.hpp"
@@ -114,18 +116,30 @@ TEST(SimCell, StepsAtItsFixedRate) {
     EXPECT_NEAR(snap->time, static_cast<double>(snap->step) / 500.0, 1e-9);
 }
 
-TEST(SimCell, GroundTruthIsReadOnlyOpcUa) {
-    const auto cell = thesisCell();
-    Simulator sim(cell, testConfig());
-    pnp::ua::server::Server server(pnp::testing::loopbackConfig());
-    pnp::sim::cell::GroundTruth truth(server, sim, {.rate = 100.0});
-    sim.start();
-    server.start();
-    truth.start();
-
+// The thesis cell's simulator with its ground truth served on loopback, and a client of it.
+struct TruthRig {
+    pnp::world::CellDescription cell = thesisCell();
+    Simulator sim{cell, testConfig()};
+    pnp::ua::server::Server server{pnp::testing::loopbackConfig()};
+    pnp::sim::cell::GroundTruth truth{server, sim, {.rate = 100.0}};
     pnp::ua::client::Client c;
-    c.connect(pnp::testing::url(server), pnp::ua::client::Anonymous{}, 5s);
-    const auto ns = c.namespaceIndex(pnp::sim::cell::kWorldNamespaceUri, 5s);
+    pnp::ua::UInt16 ns = 0;
+
+    TruthRig() {
+        sim.start();
+        server.start();
+        truth.start();
+        c.connect(pnp::testing::url(server), pnp::ua::client::Anonymous{}, 5s);
+        ns = c.namespaceIndex(pnp::sim::cell::kWorldNamespaceUri, 5s);
+    }
+};
+
+TEST(SimCell, GroundTruthIsReadOnlyOpcUa) {
+    TruthRig rig;
+    const auto& cell = rig.cell;
+    auto& c = rig.c;
+    auto& truth = rig.truth;
+    const auto ns = rig.ns;
     EXPECT_EQ(ns, truth.namespaceIndex());
     const auto joints = readDoubles(c, pnp::ua::NodeId(ns, "Robots.ur5.Joints"));
     ASSERT_EQ(joints.size(), 6u);
@@ -157,6 +171,101 @@ TEST(SimCell, GroundTruthIsReadOnlyOpcUa) {
                                      pnp::ua::Variant(std::vector<double>(6, 0.0)), 5s);
     EXPECT_EQ(status, pnp::ua::status::BadNotWritable);
     EXPECT_EQ(readDoubles(c, pnp::ua::NodeId(ns, "Robots.ur5.Joints")), joints);
+}
+
+// What a 3D view needs besides the moving parts: the cell file's static facts, read-only.
+TEST(SimCell, GroundTruthPublishesTheCellFilesStaticFacts) {
+    TruthRig rig;
+    const auto& cell = rig.cell;
+    auto& c = rig.c;
+    const auto ns = rig.ns;
+    auto text = [&](const std::string& path) {
+        const auto v = c.readValue(pnp::ua::NodeId(ns, path), 5s);
+        const auto* s = v.scalar<std::string>();
+        return s ? *s : std::string("<not a String>");
+    };
+    auto pose = [&](const std::string& path) -> std::optional<Eigen::Isometry3d> {
+        const auto v = c.readValue(pnp::ua::NodeId(ns, path), 5s);
+        const auto* x = v.scalar<pnp::ua::ExtensionObject>();
+        if (!x) return std::nullopt;
+        const auto f = pnp::ua::fromExtensionObject<pnp::ua::ThreeDFrame>(*x);
+        if (!f) return std::nullopt;
+        return pnp::ua::spatial::toIsometry(*f);
+    };
+    auto vector = [&](const std::string& path) -> std::optional<Eigen::Vector3d> {
+        const auto v = c.readValue(pnp::ua::NodeId(ns, path), 5s);
+        const auto* x = v.scalar<pnp::ua::ExtensionObject>();
+        if (!x) return std::nullopt;
+        const auto t = pnp::ua::fromExtensionObject<pnp::ua::ThreeDVector>(*x);
+        if (!t) return std::nullopt;
+        return pnp::ua::spatial::toVector(*t);
+    };
+    auto same = [](const std::optional<Eigen::Isometry3d>& a, const Eigen::Isometry3d& b) {
+        return a && (a->translation() - b.translation()).norm() < 1e-9 &&
+               (a->linear() - b.linear()).norm() < 1e-9;
+    };
+    auto names = [&](const std::string& folder) {
+        std::set<std::string> out;
+        for (const auto& r : c.browse(pnp::ua::NodeId(ns, folder), {}, 5s))
+            out.insert(r.browseName.name);
+        return out;
+    };
+
+    ASSERT_EQ(cell.robots.size(), 1u);
+    for (const auto& r : cell.robots) {
+        EXPECT_EQ(text("Robots." + r.name + ".Model"), r.modelName);
+        EXPECT_EQ(r.modelName, "ur5");
+        EXPECT_TRUE(same(pose("Robots." + r.name + ".Base"), r.base)) << r.name;
+    }
+    EXPECT_NEAR(pose("Robots.ur5.Base").value_or(Eigen::Isometry3d::Identity()).translation().x(),
+                -0.3, 1e-12);
+
+    std::set<std::string> expected;
+    for (const auto& t : cell.tables) {
+        expected.insert(t.name);
+        EXPECT_TRUE(same(pose("Tables." + t.name + ".Pose"), t.pose)) << t.name;
+        const auto size = vector("Tables." + t.name + ".Size");
+        ASSERT_TRUE(size) << t.name;
+        EXPECT_NEAR((*size - t.size).norm(), 0.0, 1e-12) << t.name;
+    }
+    EXPECT_EQ(names("Tables"), expected);
+    EXPECT_EQ(expected, std::set<std::string>{"table"});
+
+    expected.clear();
+    for (const auto& d : cell.docks) {
+        expected.insert(d.name);
+        EXPECT_TRUE(same(pose("Docks." + d.name + ".Pose"), d.pose)) << d.name;
+    }
+    EXPECT_EQ(names("Docks"), expected);
+    EXPECT_EQ(expected, (std::set<std::string>{"dock-1", "dock-2"}));
+
+    for (const auto& o : cell.objects) {
+        const auto size = vector("Objects." + o.name + ".Size");
+        ASSERT_TRUE(size) << o.name;
+        EXPECT_NEAR((*size - o.size).norm(), 0.0, 1e-12) << o.name;
+        EXPECT_EQ(text("Objects." + o.name + ".Color"), o.color);
+    }
+    EXPECT_EQ(text("Objects.cube-green.Color"), "green");
+
+    ASSERT_EQ(cell.tools.size(), 3u);
+    for (const auto& t : cell.tools)
+        EXPECT_TRUE(same(pose("Tools." + t.name + ".Tcp"), t.tcp)) << t.name;
+    EXPECT_NEAR(pose("Tools.parallel-gripper.Tcp")
+                    .value_or(Eigen::Isometry3d::Identity())
+                    .translation()
+                    .z(),
+                0.2028, 1e-12);
+
+    // Static, and read-only like the rest of the truth.
+    EXPECT_EQ(c.writeValue(pnp::ua::NodeId(ns, "Robots.ur5.Model"),
+                           pnp::ua::Variant(pnp::ua::String("ur10")), 5s),
+              pnp::ua::status::BadNotWritable);
+    EXPECT_EQ(c.writeValue(pnp::ua::NodeId(ns, "Tables.table.Size"),
+                           pnp::ua::Variant(pnp::ua::toExtensionObject(
+                               pnp::ua::spatial::toThreeDVector(Eigen::Vector3d(1, 1, 1)))),
+                           5s),
+              pnp::ua::status::BadNotWritable);
+    EXPECT_EQ(text("Robots.ur5.Model"), "ur5");
 }
 
 TEST(SimCell, ServoTargetsOverRtdeMoveTheWorldsRobot) {

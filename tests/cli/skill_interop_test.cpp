@@ -32,7 +32,8 @@ TEST(SkillInterop, NodeOpcuaClientDrivesDelaySkill) {
     pnp::testing::ChildProcess server;
     std::string error;
     ASSERT_TRUE(server.start(
-        {PNP_BINARY, "demo-skills", "--port", "0", "--host", "127.0.0.1", "--no-register"},
+        {PNP_BINARY, "demo-skills", "--port", "0", "--host", "127.0.0.1", "--no-register",
+         "--allow-none"},  // this test is about the skill model over None (secured: secure_interop)
         tmp + ".server.stderr", error))
         << error;
     std::string line;

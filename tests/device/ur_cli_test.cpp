@@ -16,6 +16,7 @@
 #include "skill/client/skill_client.hpp"
 #include "skill/client/typed_clients.hpp"
 #include "support/child_process.hpp"
+#include "support/machine_pki.hpp"
 #include "support/wait.hpp"
 #include "ua/client/client.hpp"
 
@@ -56,6 +57,7 @@ std::vector<double> axes(ua::client::Client& c, const std::string& what) {
 }
 
 TEST(DeviceUrCli, MovesTheSimulatedArmAndHaltsOnSigterm) {
+    pnp::testing::useMachinePki();
     pnp::testing::ChildProcess sim;
     std::string error, line;
     ASSERT_TRUE(sim.start({PNP_BINARY, "sim", "--ephemeral-ports", "--port", "0", "--host",

@@ -483,9 +483,12 @@ TEST_F(NodeOpcuaLdsInterop, EachLdsSeesTheOtherAndWhatRegisteredWithIt) {
     const std::string nodeUrl = "opc.tcp://" + Segment::address(1) + ":4840";
     const std::string ourUrl = "opc.tcp://" + Segment::address(2) + ":4840";
     startNode(seg, "node", "node-lds", {"lds", "4840", Segment::address(1)});
+    // Discovery interop with node-opcua over SecurityPolicy None: its servers register
+    // without having been trusted (the secured registration of a node-opcua server with our
+    // LDS: tests/cli/secure_interop_test.cpp, case e).
     seg.pnp("lds", "pnp-lds",
             {"lds", "--port", "4840", "--public-host", Segment::address(2), "--name", "pnp-lds",
-             "--mdns-interface", "eth0"});
+             "--mdns-interface", "eth0", "--allow-none"});
 
     // (a) node's LDS announces itself (instance = its ApplicationUri, SRV target = the host
     // of its endpoint URL, path=/DiscoveryServer, caps=LDS): in our FindServersOnNetwork.
@@ -543,7 +546,7 @@ TEST_F(NodeOpcuaLdsInterop, EachLdsSeesTheOtherAndWhatRegisteredWithIt) {
     // take an IPv4-literal SRV target as is (ua::discovery::urlHost).
     seg.pnp("dev2", "pnp-dev2",
             {"ua", "serve", "--port", "4842", "--public-host", Segment::address(4), "--lds",
-             nodeUrl, "--name", "pnp-dev2"});
+             nodeUrl, "--name", "pnp-dev2", "--insecure"});
     const std::string dev2Uri = "urn:pnp:" + Segment::address(4) + ":4842";
     const std::string dev2Url = "opc.tcp://" + Segment::address(4) + ":4842";
     std::vector<ApplicationDescription> apps;
@@ -581,7 +584,10 @@ TEST_F(NodeOpcuaLdsInterop, NodeOpcuaServerRegistersWithOurLds) {
     const std::string ourUrl = "opc.tcp://" + Segment::address(2) + ":4840";
     seg.pnp("lds", "pnp-lds",
             {"lds", "--port", "4840", "--public-host", Segment::address(2), "--name", "pnp-lds",
-             "--mdns-interface", "eth0", "--registration-expiry", "600000"});
+             "--mdns-interface", "eth0", "--registration-expiry", "600000",
+             // node-opcua registers over the most secure endpoint offered, with a certificate
+             // nobody trusted yet: this None interop test offers None only.
+             "--insecure"});
     auto& server =
         startNode(seg, "nsrv", "node-server", {"server", "4843", Segment::address(5), ourUrl});
     const std::string uri = "urn:pnp:node-opcua-registering-server";

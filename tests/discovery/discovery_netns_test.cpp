@@ -81,6 +81,7 @@ class Cell {
     // Starts `pnp args...` inside host; waits for its "listening on" line.
     ChildProcess& start(const std::string& host, std::vector<std::string> args) {
         args.insert(args.begin(), PNP_BINARY);
+        if (insecure) args.push_back("--insecure");
         auto& p = processes_[host];
         p = std::make_unique<ChildProcess>();
         std::string error;
@@ -92,6 +93,8 @@ class Cell {
         return *p;
     }
     void startCell() { start("cell", {"lds", "--port", "4840", "--public-host", "10.10.0.1"}); }
+    // SecurityPolicy None everywhere (no certificates): the discovery latency alone.
+    bool insecure = false;
     void startWorkstation(int k) {
         const std::string ws = "ws" + std::to_string(k);
         start(ws, {"ua", "serve", "--port", "4840", "--public-host",
@@ -247,38 +250,68 @@ TEST_F(DiscoveryNetns, StartOrderDoesNotChangeTheOutcome) {
     }
 }
 
-TEST_F(DiscoveryNetns, DeviceStartToVisibleOnTheCellBus) {
+// Device process start -> visible on the cell bus, `kRuns` times: the times (ms) and the
+// part until the device printed "listening on".
+struct StartFigures {
+    std::vector<double> visible, listening;
+};
+StartFigures measureDeviceStarts(bool insecure) {
     Cell cell;
+    cell.insecure = insecure;
     cell.startWatcher();
     cell.startCell();
     cell.startWorkstation(1);
     cell.startWorkstation(2);
-    ASSERT_TRUE(cell.waitUp({kCellUrl, wsUrl(1), wsUrl(2)}, 10s));
-    std::vector<double> ms, listening;
+    StartFigures f;
+    if (!cell.waitUp({kCellUrl, wsUrl(1), wsUrl(2)}, 10s)) {
+        ADD_FAILURE() << "the cell bus and the workstations did not come up";
+        return f;
+    }
     constexpr int kRuns = 15;
     for (int i = 0; i < kRuns; ++i) {
         const std::string d = kDevices[i % 4];
         const auto t0 = Clock::now();
         cell.startDevice(d);
-        listening.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+        f.listening.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
         auto at = cell.waitFor(deviceUrl(d), true, t0, 5s);
-        ASSERT_TRUE(at) << d << " not visible within 5 s (run " << i << ")";
-        ms.push_back(std::chrono::duration<double, std::milli>(*at - t0).count());
+        if (!at) {
+            ADD_FAILURE() << d << " not visible within 5 s (run " << i << ")";
+            return f;
+        }
+        f.visible.push_back(std::chrono::duration<double, std::milli>(*at - t0).count());
         const auto t1 = Clock::now();
         cell.stop(d);  // graceful: unregisters
-        ASSERT_TRUE(cell.waitFor(deviceUrl(d), false, t1, 5s)) << d << " not gone";
+        if (!cell.waitFor(deviceUrl(d), false, t1, 5s)) {
+            ADD_FAILURE() << d << " not gone";
+            return f;
+        }
     }
     std::printf(
-        "[ figures  ] device process start -> visible on the cell bus (two segments "
+        "[ figures  ] %s: device process start -> visible on the cell bus (two segments "
         "away), %d runs: median %.1f ms, p95 %.1f ms, max %.1f ms\n",
-        kRuns, median(ms), percentile(ms, 0.95), *std::max_element(ms.begin(), ms.end()));
+        insecure ? "SecurityPolicy None" : "secured (the default)", kRuns, median(f.visible),
+        percentile(f.visible, 0.95), *std::max_element(f.visible.begin(), f.visible.end()));
     std::printf(
         "[ figures  ]   of which process start -> \"listening on\" read by the test: "
         "median %.1f ms\n",
-        median(listening));
+        median(f.listening));
+    return f;
+}
+
+// The discovery chain's latency (mDNS, LDS-ME registration, the watcher) is asserted without
+// security; the secured default adds the certificate's loading and a secured RegisterServer2
+// (figure printed; issue 24's closing note).
+TEST_F(DiscoveryNetns, DeviceStartToVisibleOnTheCellBus) {
+    const StartFigures none = measureDeviceStarts(true);
+    ASSERT_FALSE(none.visible.empty());
 #ifndef PNP_SANITIZED_BUILD
-    EXPECT_LT(median(ms), 50.0);
-    EXPECT_LT(percentile(ms, 0.95), 150.0);
+    EXPECT_LT(median(none.visible), 50.0);
+    EXPECT_LT(percentile(none.visible, 0.95), 150.0);
+#endif
+    const StartFigures secured = measureDeviceStarts(false);
+    ASSERT_FALSE(secured.visible.empty());
+#ifndef PNP_SANITIZED_BUILD
+    EXPECT_LT(percentile(secured.visible, 0.95), 500.0);
 #endif
 }
 

@@ -12,6 +12,7 @@
 #include "skill/client/skill_client.hpp"
 #include "skill/client/typed_clients.hpp"
 #include "support/child_process.hpp"
+#include "support/machine_pki.hpp"
 #include "support/wait.hpp"
 #include "ua/client/client.hpp"
 
@@ -58,6 +59,7 @@ bool operatorAction(const std::string& action, const std::string& world) {
 }
 
 TEST(DeviceRobotiqCli, ServesTheGripperOnlyWhileItIsAttached) {
+    pnp::testing::useMachinePki();
     pnp::testing::ChildProcess sim;
     std::string error, line;
     ASSERT_TRUE(sim.start({PNP_BINARY, "sim", "--ephemeral-ports", "--port", "0", "--host",

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <mutex>
@@ -19,6 +20,7 @@
 #include "support/wait.hpp"
 #include "ua/client/client.hpp"
 #include "ua/discovery/registrar.hpp"
+#include "ua/types/ns0_ids.hpp"
 
 using namespace pnp;
 using namespace std::chrono_literals;
@@ -178,6 +180,41 @@ TEST(ToolAdapter, ServesOnlyWhileTheGripperAnswers) {
     EXPECT_EQ(events.of(PowerEvent::Kind::kDown).size(), 2u);
     EXPECT_TRUE(events.of(PowerEvent::Kind::kError).empty());
     lds.stop();
+}
+
+// prepareServer (the CLI's role permissions and Part 12 certificate management) runs on every
+// server the adapter builds, before it serves: what it adds is there after each power-up.
+TEST(ToolAdapter, EveryServerIsPreparedBeforeItServes) {
+    FakeGripper gripper;
+    gripper.powered = false;
+    ToolAdapterOptions o = toolOptions();
+    std::atomic<int> prepared{0};
+    o.prepareServer = [&](ua::server::Server& s) {
+        ua::server::VariableAttributes a;
+        a.dataType = ua::NodeId(0, ua::ns0::Int32);
+        a.value = ua::DataValue(ua::Variant(ua::Int32{++prepared}));
+        s.addressSpace().addVariable(ua::NodeId(0, ua::ns0::ObjectsFolder),
+                                     ua::NodeId(1, "Prepared"), ua::QualifiedName{1, "Prepared"},
+                                     a);
+    };
+    ToolAdapter adapter(gripper, o);
+    EXPECT_EQ(prepared.load(), 1);  // the first server, built by the constructor
+    adapter.start();
+    const auto readPrepared = [&] {
+        ua::client::Client c;
+        c.connect(adapter.endpointUrl());
+        const ua::Variant v = c.readValue(ua::NodeId(1, "Prepared"), 5s);
+        c.disconnect();
+        return v;
+    };
+    for (int powerUp = 1; powerUp <= 2; ++powerUp) {
+        gripper.powered = true;
+        ASSERT_TRUE(waitUntil([&] { return adapter.serving(); }, 2000ms));
+        EXPECT_EQ(readPrepared(), ua::Variant(ua::Int32{powerUp}));
+        gripper.powered = false;
+        ASSERT_TRUE(waitUntil([&] { return !adapter.serving(); }, 2000ms));
+    }
+    adapter.stop();
 }
 
 TEST(ToolAdapter, ASkillRunningWhenThePowerGoesEndsAndTheServerStops) {

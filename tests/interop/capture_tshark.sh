@@ -84,7 +84,7 @@ wait_for_line "$OUT/tshark-capture.log" "Capture started" 2 "$TSHARK_PID" 2>/dev
 sleep 0.5
 
 # ---- 2. server + client ---------------------------------------------------------------
-"$PNP_BINARY" ua serve --port "$PORT" --no-register --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}" \
+"$PNP_BINARY" ua serve --port "$PORT" --no-register --allow-none --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}" \
     >"$OUT/pnp-server.log" 2>&1 </dev/null &
 SERVER_PID=$!
 client_rc=99

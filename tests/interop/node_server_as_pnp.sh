@@ -7,7 +7,7 @@
 # --instance (node_server.js loads no Robotics model: node_client.js skips those checks).
 set -euo pipefail
 usage() {
-    echo "usage: $0 ua serve --port PORT [--no-register] [--user NAME:PASSWORD | --nodeset FILE | --instance SPEC]..." >&2
+    echo "usage: $0 ua serve --port PORT [--no-register | --allow-none | --insecure] [--user NAME:PASSWORD | --nodeset FILE | --instance SPEC]..." >&2
     exit 2
 }
 if [[ $# -lt 4 || "$1" != "ua" || "$2" != "serve" || "$3" != "--port" ]]; then
@@ -15,7 +15,8 @@ if [[ $# -lt 4 || "$1" != "ua" || "$2" != "serve" || "$3" != "--port" ]]; then
 fi
 rest=("${@:5}")
 while ((${#rest[@]} > 0)); do
-    if [[ "${rest[0]}" == "--no-register" ]]; then  # node_server.js registers nowhere anyway
+    # node_server.js registers nowhere and always offers None, so these flags change nothing
+    if [[ "${rest[0]}" =~ ^--(no-register|allow-none|insecure)$ ]]; then
         rest=("${rest[@]:1}")
         continue
     fi

@@ -54,7 +54,9 @@ trap 'exit 143' TERM
 # A Robotics (OPC 40010-1) model loaded from NodeSet2 XML, with two instances (node_client.js
 # browses and reads them).
 # --no-register: tests talk to loopback only (no mDNS on the machine's network).
-SERVE_ARGS=(ua serve --port "$PORT" --no-register --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}")
+# --allow-none: the harness exercises every service over SecurityPolicy None (the secured
+# endpoints: tests/cli/secure_interop_test.cpp).
+SERVE_ARGS=(ua serve --port "$PORT" --no-register --allow-none --user operator:secret "${ROBOTICS_SERVE_ARGS[@]}")
 ilog "starting: $PNP_BINARY ${SERVE_ARGS[*]} (log: $SERVER_LOG)"
 "$PNP_BINARY" "${SERVE_ARGS[@]}" >"$SERVER_LOG" 2>&1 </dev/null &
 SERVER_PID=$!

@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
@@ -18,6 +20,8 @@
 #include "skill/detector/skill_detector.hpp"
 #include "skill/server/controller.hpp"
 #include "support/loopback_server.hpp"
+#include "ua/client/subscription.hpp"
+#include "ua/types/status_codes.hpp"
 
 using namespace pnp;
 using namespace std::chrono_literals;
@@ -41,6 +45,7 @@ const char* kProcesses = R"(
 @prefix cell: <urn:pnp:kb:cell#> .
 @prefix demo: <urn:pnp:ua:skills:demo#> .
 @prefix base: <urn:pnp:ua:skills#> .
+@prefix rdfs: <http://www.w3.org/2000/01/rdf-schema#> .
 
 cell:station a pnp:Resource ; pnp:dwell "30" .
 
@@ -61,6 +66,12 @@ proc:jam a pnp:Process .
 proc:jam-1 a pnp:Step ; pnp:process proc:jam ; pnp:index 1 ; pnp:skillType demo:DelaySkillType ;
     pnp:binding [ pnp:name "FailWith" ; pnp:value "jammed" ] .
 proc:jam-2 a pnp:Step ; pnp:process proc:jam ; pnp:index 2 ; pnp:skillType demo:DelaySkillType .
+
+proc:slow a pnp:Process .
+proc:slow-1 a pnp:Step ; pnp:process proc:slow ; pnp:index 1 ; rdfs:label "first wait" ;
+    pnp:skillType demo:DelaySkillType ; pnp:binding [ pnp:name "DurationMs" ; pnp:value "400" ] .
+proc:slow-2 a pnp:Step ; pnp:process proc:slow ; pnp:index 2 ; rdfs:label "second wait" ;
+    pnp:skillType demo:DelaySkillType ; pnp:binding [ pnp:name "DurationMs" ; pnp:value "400" ] .
 
 proc:long a pnp:Process .
 proc:long-1 a pnp:Step ; pnp:process proc:long ; pnp:index 1 ; pnp:skillType demo:DelaySkillType ;
@@ -273,6 +284,97 @@ TEST_F(MesRun, HaltOfExecuteProcessHaltsTheRunningStepsSkill) {
     const auto halted = json::parse(recorded.empty() ? "{}" : recorded);
     EXPECT_EQ(halted.value("result", ""), "Halted") << recorded;
     EXPECT_EQ(halted.value("process", ""), "urn:pnp:kb:process#long");
+}
+
+// While a process runs, a client subscribed to ExecuteProcess/CurrentStep and /Progress sees
+// which step runs and each step's result as it ends (the Record comes only at the end).
+TEST_F(MesRun, PublishesTheRunningStepAndTheResultsSoFar) {
+    auto watcher = std::make_shared<ua::client::Client>();
+    watcher->connect(pnp::testing::url(*mesServer));
+    ua::NodeId currentStep, progress;
+    for (const auto& r : watcher->browse(theMes->skills().front().node(), {}, 5s)) {
+        if (r.browseName.name == "CurrentStep") currentStep = r.nodeId.nodeId;
+        if (r.browseName.name == "Progress") progress = r.nodeId.nodeId;
+    }
+    ASSERT_FALSE(currentStep.isNull());
+    ASSERT_FALSE(progress.isNull());
+    // Read-only for clients.
+    EXPECT_EQ(watcher->writeValue(currentStep, ua::Variant(ua::UInt32{7}), 5s),
+              ua::status::BadNotWritable);
+
+    std::mutex mutex;
+    std::vector<ua::UInt32> steps;
+    std::vector<json> progresses;
+    watcher->startBackgroundThread();
+    ua::client::Subscription sub(*watcher, {.publishingInterval = 20}, {}, 5s);
+    auto stepItem = sub.monitorValue(
+        currentStep,
+        [&](const ua::DataValue& v) {
+            if (const auto* n = v.value ? v.value->scalar<ua::UInt32>() : nullptr) {
+                std::lock_guard l(mutex);
+                if (steps.empty() || steps.back() != *n) steps.push_back(*n);
+            }
+        },
+        {.samplingInterval = 0, .queueSize = 20}, 5s);
+    auto progressItem = sub.monitorValue(
+        progress,
+        [&](const ua::DataValue& v) {
+            if (const auto* t = v.value ? v.value->scalar<ua::String>() : nullptr)
+                if (!t->empty()) {
+                    std::lock_guard l(mutex);
+                    progresses.push_back(json::parse(*t));
+                }
+        },
+        {.samplingInterval = 0, .queueSize = 20}, 5s);
+
+    auto [r, record] = run("urn:pnp:kb:process#slow");
+    ASSERT_EQ(r.result, skill::SkillResult::Completed) << r.message;
+    // The end's values reach the subscriber within a few publishing intervals.
+    const auto until = std::chrono::steady_clock::now() + 3s;
+    for (;;) {
+        {
+            std::lock_guard l(mutex);
+            if (!progresses.empty() && progresses.back()["result"] == "Completed") break;
+        }
+        if (std::chrono::steady_clock::now() > until) break;
+        std::this_thread::sleep_for(10ms);
+    }
+    std::lock_guard l(mutex);
+    // CurrentStep: 1, then 2 (with 0 between the steps), then 0 at the end.
+    std::vector<ua::UInt32> nonZero;
+    for (auto n : steps)
+        if (n != 0) nonZero.push_back(n);
+    EXPECT_EQ(nonZero, (std::vector<ua::UInt32>{1, 2}));
+    ASSERT_FALSE(steps.empty());
+    EXPECT_EQ(steps.back(), 0u);
+
+    ASSERT_FALSE(progresses.empty());
+    const json& last = progresses.back();
+    EXPECT_EQ(last["result"], "Completed");
+    EXPECT_EQ(last["execution"], record["execution"]);
+    EXPECT_EQ(last["process"], "urn:pnp:kb:process#slow");
+    EXPECT_TRUE(last["running"].is_null());
+    ASSERT_EQ(last["steps"].size(), 2u);
+    for (const auto& s : last["steps"]) {
+        EXPECT_EQ(s["result"], "Completed");
+        EXPECT_EQ(s["skill"], "Wait");
+        EXPECT_EQ(s["skillType"], "DelaySkillType");
+        EXPECT_GE(s["durationS"].get<double>(), 0.39);
+    }
+    EXPECT_EQ(last["steps"][0]["label"], "first wait");
+    // While step 2 ran: step 1 had its result, step 2 none yet; every step was planned from
+    // the start.
+    const auto during = std::find_if(progresses.begin(), progresses.end(),
+                                     [](const json& p) { return p["running"] == 2; });
+    ASSERT_NE(during, progresses.end());
+    EXPECT_TRUE((*during)["result"].is_null());
+    ASSERT_EQ((*during)["steps"].size(), 2u);
+    EXPECT_EQ((*during)["steps"][0]["result"], "Completed");
+    EXPECT_TRUE((*during)["steps"][1]["result"].is_null());
+    EXPECT_EQ((*during)["steps"][1]["label"], "second wait");
+    EXPECT_TRUE(std::any_of(progresses.begin(), progresses.end(), [](const json& p) {
+        return p["running"] == 1 && p["steps"].size() == 2 && p["steps"][0]["result"].is_null();
+    }));
 }
 
 TEST_F(MesRun, TheLiveGraphFollowsTheDetector) {

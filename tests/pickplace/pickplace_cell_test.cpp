@@ -113,8 +113,10 @@ struct Cell {
                                   "--port", "0", "--no-mdns"}),
                             tmpPath("changer.log"), error))
             return false;
+        // --allow-none: node-opcua's client below uses SecurityPolicy None (the secured
+        // node-opcua interop: tests/cli/secure_interop_test.cpp).
         if (!pickplace_.start(with({kPnp, "component", "pick-place", "--kb-file", kbFile, "--port",
-                                    "0", "--no-mdns"}),
+                                    "0", "--no-mdns", "--allow-none"}),
                               tmpPath("pickplace.log"), error))
             return false;
         if (!changer_.waitForPrefix("listening on ", 30s, error, &line)) return false;

@@ -282,7 +282,10 @@ TEST(UrController, ProtectiveStopOnContact) {
     // Start 5 mm above the table, flange down, away from the cube.
     cell.robots[0].home = flangeAt(cell, {0.1, -0.1, 0.005}, cell.robots[0].home);
     world::World world(cell);
-    UrController ur(world, {});
+    std::vector<std::string> log;
+    UrControllerConfig config;
+    config.log = [&](const std::string& line) { log.push_back(line); };
+    UrController ur(world, config);
     const Joints start = world.robot(0).q;
     bool stopped = false;
     // Down at 2 cm/s: contact after 0.25 s, 250 N (12.5 mm) after another 0.63 s.
@@ -303,6 +306,10 @@ TEST(UrController, ProtectiveStopOnContact) {
     EXPECT_NEAR(std::get<rtde::Vector6d>(ur.read("actual_TCP_force"))[2],
                 world.robot(0).tcpForce.z(), 1e-9);
     EXPECT_FALSE(ur.following());
+    // The operator is told once, with the force and where (the table's normal: +z).
+    ASSERT_EQ(log.size(), 1u);
+    EXPECT_EQ(log[0].rfind("ur5: protective stop: TCP force 2", 0), 0u) << log[0];
+    EXPECT_NE(log[0].find("> 250.0 N at TCP (0.1"), std::string::npos) << log[0];
     // Comes to rest; targets (even re-armed, while still pressed) are ignored.
     for (int i = 0; i < 500; ++i) {
         ur.write("input_int_register_0", std::int32_t{i % 2});
@@ -315,6 +322,7 @@ TEST(UrController, ProtectiveStopOnContact) {
     EXPECT_EQ(std::get<std::int32_t>(ur.read("safety_mode")), 3);
     // Not far into the table: the stop came within a few steps.
     EXPECT_GT(world.robot(0).tcp.translation().z(), -0.014);
+    EXPECT_EQ(log.size(), 1u);  // still in the stop: nothing more told
 }
 
 // The servo program for a scripted input sequence; returns every step's joints and speeds.

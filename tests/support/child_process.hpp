@@ -20,6 +20,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -215,6 +216,41 @@ class ChildProcess {
             ::close(out_);
             out_ = -1;
         }
+    }
+
+    // Waits up to `timeout` for the child to exit by itself and reaps it: its exit code
+    // (128 + N when killed by signal N), or nullopt if it still runs.
+    std::optional<int> waitExit(std::chrono::milliseconds timeout) {
+        const auto end = std::chrono::steady_clock::now() + timeout;
+        while (pid_ > 0) {
+            int status = 0;
+            const pid_t r = ::waitpid(pid_, &status, WNOHANG);
+            if (r == pid_) {
+                pid_ = -1;
+                return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+            }
+            if (r < 0 || std::chrono::steady_clock::now() >= end) break;
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+        return std::nullopt;
+    }
+
+    // Reads the rest of stdout (until the child closes it or `timeout`).
+    std::string readAll(std::chrono::milliseconds timeout) {
+        std::string all;
+        const auto end = std::chrono::steady_clock::now() + timeout;
+        while (out_ >= 0) {
+            const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+                end - std::chrono::steady_clock::now());
+            if (left.count() <= 0) break;
+            pollfd p{out_, POLLIN, 0};
+            if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) continue;
+            char tmp[4096];
+            const ssize_t r = ::read(out_, tmp, sizeof tmp);
+            if (r <= 0) break;
+            all.append(tmp, static_cast<std::size_t>(r));
+        }
+        return all;
     }
 
     pid_t pid() const { return pid_; }

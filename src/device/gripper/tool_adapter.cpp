@@ -44,7 +44,9 @@ struct ToolAdapter::Impl {
     void prepare() {
         if (server) return;
         auto s = std::make_unique<ua::server::Server>(options.server);
-        device = std::make_unique<GripperDevice>(*s, self.access_, options.device);
+        auto d = std::make_unique<GripperDevice>(*s, self.access_, options.device);
+        if (options.prepareServer) options.prepareServer(*s);
+        device = std::move(d);
         server = std::move(s);
     }
 
@@ -61,8 +63,11 @@ struct ToolAdapter::Impl {
             auto s = h.status(Clock::now() + options.pollTimeout);
             if (!s &&
                 (s.error().kind == ErrorKind::kNoDevice || s.error().kind == ErrorKind::kTimeout)) {
-                h.disconnect();  // a fresh transport next time (a TCP peer may be gone)
-                connected = false;
+                // A fresh transport (a TCP peer may be gone), at once: a skill that takes the
+                // hardware next must not find it disconnected while the device still answers
+                // (a poll that was only late on a loaded machine).
+                h.disconnect();
+                connected = static_cast<bool>(h.connect(Clock::now() + options.pollTimeout));
             }
             return s;
         });

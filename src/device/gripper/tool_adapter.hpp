@@ -49,6 +49,9 @@ struct ToolAdapterOptions {
     // Activate (Robotiq rACT, WSG homing) right after the server is up, so that the first
     // skill does not wait for it.
     bool activateOnPowerUp = true;
+    // Called on every server built, after the device's nodes (e.g. role permissions and the
+    // Part 12 certificate management); may throw like the constructor.
+    std::function<void(ua::server::Server&)> prepareServer;
 };
 
 struct PowerEvent {

@@ -30,6 +30,8 @@ Variant vector3(const Eigen::Vector3d& v) {
     return Variant(ua::toExtensionObject(ua::spatial::toThreeDVector(v)));
 }
 
+Variant text(const std::string& s) { return Variant(ua::String(s)); }
+
 Variant changer(world::ChangerLock lock) {
     switch (lock) {
         case world::ChangerLock::kOpen:
@@ -105,6 +107,23 @@ struct GroundTruth::Impl {
                      Variant(r.changerVoltage));
             variable(o, p + ".Dock", "Dock", ua::ns0::String, -1,
                      Variant(ua::String(r.dock.value_or(""))));
+            if (const auto* d = cell.findRobot(r.name)) {
+                variable(o, p + ".Model", "Model", ua::ns0::String, -1, text(d->modelName));
+                variable(o, p + ".Base", "Base", ua::ns0::ThreeDFrame, -1, frame(d->base));
+            }
+        }
+        const NodeId tables = space.addFolder(root, id("Tables"), QualifiedName{ns, "Tables"});
+        for (const auto& t : cell.tables) {
+            const std::string p = "Tables." + t.name;
+            const NodeId o = space.addObject(tables, id(p), QualifiedName{ns, t.name});
+            variable(o, p + ".Pose", "Pose", ua::ns0::ThreeDFrame, -1, frame(t.pose));
+            variable(o, p + ".Size", "Size", ua::ns0::ThreeDVector, -1, vector3(t.size));
+        }
+        const NodeId docks = space.addFolder(root, id("Docks"), QualifiedName{ns, "Docks"});
+        for (const auto& d : cell.docks) {
+            const std::string p = "Docks." + d.name;
+            const NodeId o = space.addObject(docks, id(p), QualifiedName{ns, d.name});
+            variable(o, p + ".Pose", "Pose", ua::ns0::ThreeDFrame, -1, frame(d.pose));
         }
         const NodeId objects = space.addFolder(root, id("Objects"), QualifiedName{ns, "Objects"});
         for (const auto& x : snap->objects) {
@@ -113,6 +132,11 @@ struct GroundTruth::Impl {
             variable(o, p + ".Pose", "Pose", ua::ns0::ThreeDFrame, -1, frame(x.pose));
             variable(o, p + ".Holder", "Holder", ua::ns0::String, -1,
                      Variant(ua::String(x.holder)));
+            if (const auto* d = cell.findObject(x.name)) {
+                variable(o, p + ".Size", "Size", ua::ns0::ThreeDVector, -1, vector3(d->size));
+                if (!d->color.empty())
+                    variable(o, p + ".Color", "Color", ua::ns0::String, -1, text(d->color));
+            }
         }
         const NodeId tools = space.addFolder(root, id("Tools"), QualifiedName{ns, "Tools"});
         for (const auto& t : snap->tools) {
@@ -125,6 +149,8 @@ struct GroundTruth::Impl {
             variable(o, p + ".Powered", "Powered", ua::ns0::Boolean, -1, Variant(t.powered));
             variable(o, p + ".Held", "Held", ua::ns0::String, -1,
                      Variant(ua::String(t.held.value_or(""))));
+            if (const auto* d = cell.findTool(t.name))
+                variable(o, p + ".Tcp", "Tcp", ua::ns0::ThreeDFrame, -1, frame(d->tcp));
         }
         addOperatorMethods(root);
     }
@@ -159,7 +185,7 @@ struct GroundTruth::Impl {
         return a;
     }
 
-    static std::string text(const Variant& v) {
+    static std::string textOf(const Variant& v) {
         const auto* s = v.scalar<ua::String>();
         return s != nullptr ? std::string(*s) : std::string();
     }
@@ -169,21 +195,21 @@ struct GroundTruth::Impl {
                        {stringArgument("Tool", "a tool of the cell (on the shelf or in a dock)"),
                         stringArgument("Dock", "an empty dock")},
                        [](world::World& w, std::vector<Variant>& in) {
-                           return w.putToolInDock(text(in[0]), text(in[1]));
+                           return w.putToolInDock(textOf(in[0]), textOf(in[1]));
                        });
         operatorMethod(
             root, "TakeToolOut", {stringArgument("Tool", "a tool in a dock; it goes to the shelf")},
-            [](world::World& w, std::vector<Variant>& in) { return w.takeToolOut(text(in[0])); });
+            [](world::World& w, std::vector<Variant>& in) { return w.takeToolOut(textOf(in[0])); });
         operatorMethod(root, "AttachToolByHand",
                        {stringArgument("Robot", "a robot whose changer is open and empty"),
                         stringArgument("Tool", "a tool in a dock or on the shelf")},
                        [](world::World& w, std::vector<Variant>& in) {
-                           return w.attachToolByHand(text(in[0]), text(in[1]));
+                           return w.attachToolByHand(textOf(in[0]), textOf(in[1]));
                        });
         operatorMethod(root, "DetachToolByHand",
                        {stringArgument("Robot", "a robot with a tool; the tool goes to the shelf")},
                        [](world::World& w, std::vector<Variant>& in) {
-                           return w.detachToolByHand(text(in[0]));
+                           return w.detachToolByHand(textOf(in[0]));
                        });
         ua::Argument pose;
         pose.name = "Pose";
@@ -205,12 +231,13 @@ struct GroundTruth::Impl {
                            }
                            if (!frame || !ua::spatial::finite(*frame))
                                return std::string("Pose is not a finite ThreeDFrame");
-                           return w.placeObject(text(in[0]), ua::spatial::toIsometry(*frame));
+                           return w.placeObject(textOf(in[0]), ua::spatial::toIsometry(*frame));
                        });
-        operatorMethod(
-            root, "RemoveObject",
-            {stringArgument("Object", "an object of the cell; it leaves the cell")},
-            [](world::World& w, std::vector<Variant>& in) { return w.removeObject(text(in[0])); });
+        operatorMethod(root, "RemoveObject",
+                       {stringArgument("Object", "an object of the cell; it leaves the cell")},
+                       [](world::World& w, std::vector<Variant>& in) {
+                           return w.removeObject(textOf(in[0]));
+                       });
     }
 
     void set(const std::string& path, Variant value) {

@@ -146,6 +146,7 @@ Simulator::Simulator(world::CellDescription cell, SimulatorConfig config)
     for (std::size_t i = 0; i < robots.size(); ++i) {
         ur::UrControllerConfig uc;
         uc.robot = i;
+        uc.log = config.log;
         impl_->controllers.push_back(std::make_unique<ur::UrController>(impl_->world, uc));
         rtde::ServerConfig sc;
         sc.bindAddress = config.bindAddress;

@@ -32,6 +32,9 @@ struct SimulatorConfig {
     // Called on the stepping thread after every step (tests and benchmarks that check each
     // step of the world); keep it short.
     std::function<void(const world::World&)> onStep;
+    // Events an operator should read (a robot's protective stop and its cause), on the
+    // stepping thread; rare.
+    std::function<void(const std::string&)> log;
 };
 
 // Where an adapter finds a simulated device.

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -209,6 +210,18 @@ void UrController::step(double dt) {
     outputs_["target_qdd"] = toVector(commandAcceleration_);
 }
 
+void UrController::logProtectiveStop(const world::RobotState& robot) const {
+    const Eigen::Vector3d& f = robot.tcpForce;
+    const Eigen::Vector3d p = robot.tcp.translation();
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  ": protective stop: TCP force %.1f N (%.1f, %.1f, %.1f) > %.1f N at TCP "
+                  "(%.4f, %.4f, %.4f) m, tool %s",
+                  f.norm(), f.x(), f.y(), f.z(), config_.protectiveStopForce, p.x(), p.y(), p.z(),
+                  robot.tool ? robot.tool->c_str() : "none");
+    config_.log(world_.description().robots[config_.robot].name + text);
+}
+
 void UrController::servo(const Inputs& in, double dt) {
     const world::RobotState& robot = world_.robot(config_.robot);
     Joints q = robot.q;  // the world is the truth; the controller moves it
@@ -234,12 +247,16 @@ void UrController::servo(const Inputs& in, double dt) {
     if (!protective_ && forceHigh) {
         protective_ = true;
         rearmZero_ = false;
+        if (config_.log) logProtectiveStop(robot);
     }
     if (tripped_ || protective_) {
         // Re-arm: the register seen 0 after the stop, then 1 with fresh inputs (and, after
         // a protective stop, the force back below the limit).
         if (in.zeroSeen || !on) rearmZero_ = true;
         if (rearmZero_ && on && fresh && !forceHigh) {
+            if (protective_ && config_.log)
+                config_.log(world_.description().robots[config_.robot].name +
+                            ": protective stop cleared (re-armed)");
             tripped_ = false;
             protective_ = false;
             rearmZero_ = false;

@@ -13,6 +13,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -33,6 +34,9 @@ struct UrControllerConfig {
     double maxAcceleration = 0.0;
     // Protective stop when |TCP force| exceeds this (N), as a UR's safety system does.
     double protectiveStopForce = 250.0;
+    // Told (on the stepping thread; rare) when a protective stop starts, with the force and
+    // where, and when it is cleared: what an operator reads on a real UR's teach pendant.
+    std::function<void(const std::string&)> log;
 };
 
 class UrController : public rtde::ControllerState {
@@ -82,6 +86,7 @@ class UrController : public rtde::ControllerState {
     };
     Inputs latch(double dt);
     void servo(const Inputs& in, double dt);
+    void logProtectiveStop(const world::RobotState& robot) const;
 
     world::World& world_;
     UrControllerConfig config_;

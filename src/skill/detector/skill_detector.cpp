@@ -432,7 +432,7 @@ Examination examine(const std::string& url, const std::optional<ua::ApplicationD
     cc.applicationName = "pnp skill detector";
     cc.applicationUri = "urn:pnp:skill-detector";
     cc.requestTimeout = cfg.requestTimeout;
-    cc.connectTimeout = cfg.requestTimeout;
+    cc.connectTimeout = cfg.connectTimeout;
     cc.closeTimeout = std::chrono::milliseconds(200);
     // A broken connection must show as a failed health check (skills removed, server
     // examined afresh), not be papered over by a silent reconnect.

@@ -93,7 +93,11 @@ std::string_view toString(ServerState::Status s);
 struct DetectorConfig {
     ua::discovery::WatcherConfig watcher;
     bool useDiscovery = true;                        // false: addServer() only, no watcher
-    std::chrono::milliseconds requestTimeout{1000};  // per connect and per request
+    std::chrono::milliseconds requestTimeout{1000};  // per request
+    // Per connect: a secured one (GetEndpoints, OpenSecureChannel with RSA on both sides,
+    // CreateSession and ActivateSession with signatures) needs more than a request does on
+    // a loaded machine.
+    std::chrono::milliseconds connectTimeout{3000};
     std::chrono::milliseconds healthInterval{250};
     std::size_t maxDepth = 4;     // Browse levels below Objects
     std::size_t maxNodes = 2000;  // Objects browsed per server at most

@@ -136,6 +136,13 @@ std::string describe(std::string_view service, const NodeId& node) {
 class Client::Impl {
   public:
     explicit Impl(ClientConfig c) : config(std::move(c)), backoff(config.reconnect.initialDelay) {}
+
+    // keepDiscoveryConnection: the last temporary connection, with its URL and whether it
+    // is secured. Guarded by discoveryMutex (not the session's lock).
+    std::mutex discoveryMutex;
+    std::unique_ptr<transport::ClientConnection> discoveryConnection;
+    std::string discoveryUrl;
+    bool discoverySecured = false;
     ~Impl() {
         if (wakeFd >= 0) ::close(wakeFd);
     }
@@ -147,6 +154,11 @@ class Client::Impl {
         ByteString serverNonce;
         std::string anonymousPolicyId = "anonymous";
         std::string userNamePolicyId = "username";
+        // The policy a password is encrypted with (empty: sent as it is, only on an
+        // encrypted channel or when the server asks for it that way).
+        std::string userNameSecurityPolicyUri;
+        std::string certificatePolicyId = "x509";
+        std::string certificateSecurityPolicyUri;
     };
     struct Pending {
         Clock::time_point deadline;
@@ -155,6 +167,10 @@ class Client::Impl {
     };
 
     ClientConfig config;
+    // The secured channel chosen by connect() (null: None), and the endpoint it belongs to.
+    std::shared_ptr<const transport::ClientSecurityConfig> channelSecurity;
+    std::optional<EndpointDescription> endpoint;
+    ByteString clientNonce;  // of the last CreateSession
     mutable std::mutex mutex;
     CompletionQueue completions;  // every callback runs through it (order, one at a time)
     std::unique_ptr<transport::ClientConnection> conn;  // null: no channel
@@ -214,6 +230,7 @@ class Client::Impl {
     transport::ClientConfig transportConfig() const {
         transport::ClientConfig t = config.transport;
         t.requestedLifetime = config.secureChannelLifetime;
+        t.security = channelSecurity;
         return t;
     }
 
@@ -448,41 +465,96 @@ class Client::Impl {
         req.sessionName =
             config.sessionName.empty() ? config.applicationName + " session" : config.sessionName;
         req.clientNonce = randomNonce();
+        clientNonce = req.clientNonce;
         req.requestedSessionTimeout = static_cast<Double>(config.requestedSessionTimeout.count());
         req.maxResponseMessageSize = config.transport.maxMessageSize;
+        if (channelSecurity) {
+            const auto& der = channelSecurity->identity.certificate.der();
+            req.clientCertificate = ByteString(der.data(), der.size());
+        }
         setSession(std::nullopt);
         sessionActive = false;
         CreateSessionResponse resp = sessionCall(req, deadline, done);
+        if (channelSecurity) checkServerSignature(req, resp);
 
         Session s;
         s.sessionId = std::move(resp.sessionId);
         s.authenticationToken = std::move(resp.authenticationToken);
         s.revisedTimeout = resp.revisedSessionTimeout;
         s.serverNonce = std::move(resp.serverNonce);
-        choosePolicies(resp.serverEndpoints, s);
+        choosePolicies(
+            endpoint ? std::vector<EndpointDescription>{*endpoint} : resp.serverEndpoints, s);
         setSession(std::move(s));
         sessionInvalid = false;
         namespaces.clear();  // possibly another server (instance)
         ++stats.sessionsCreated;
     }
 
+    // The server proves it holds its certificate's key: serverSignature over our certificate
+    // and nonce (Part 4 §5.6.2), with the certificate we opened the channel to.
+    void checkServerSignature(const CreateSessionRequest& req, const CreateSessionResponse& resp) {
+        const auto& server = channelSecurity->serverCertificate;
+        const auto& der = server.der();
+        const auto& policy = *channelSecurity->policy;
+        crypto::Bytes data(req.clientCertificate.data(),
+                           req.clientCertificate.data() + req.clientCertificate.size());
+        data.insert(data.end(), req.clientNonce.data(),
+                    req.clientNonce.data() + req.clientNonce.size());
+        const bool sameCertificate =
+            resp.serverCertificate.size() >= der.size() &&
+            std::equal(der.begin(), der.end(), resp.serverCertificate.data());
+        const bool signed_ =
+            resp.serverSignature.algorithm == policy.asymmetricSignatureUri &&
+            crypto::verify(server.publicKey(), policy.asymmetricSignature, data,
+                           crypto::ByteView(resp.serverSignature.signature.data(),
+                                            resp.serverSignature.signature.size()));
+        if (!sameCertificate || !signed_)
+            throw Error(status::BadApplicationSignatureInvalid,
+                        "CreateSession: the server's signature does not prove its certificate");
+    }
+
     static void choosePolicies(const std::vector<EndpointDescription>& endpoints, Session& s) {
-        bool anonymous = false, user = false;
+        bool anonymous = false, user = false, certificate = false;
         for (const auto& ep : endpoints) {
-            if (!ep.securityPolicyUri.empty() && ep.securityPolicyUri != kSecurityPolicyNone)
-                continue;
+            const bool secured =
+                !ep.securityPolicyUri.empty() && ep.securityPolicyUri != kSecurityPolicyNone;
             for (const auto& t : ep.userIdentityTokens) {
-                bool plain =
-                    t.securityPolicyUri.empty() || t.securityPolicyUri == kSecurityPolicyNone;
+                const bool ownPolicy =
+                    !t.securityPolicyUri.empty() && t.securityPolicyUri != kSecurityPolicyNone;
+                // Empty on a secured endpoint: the channel's policy protects the token.
+                const std::string policy =
+                    ownPolicy ? t.securityPolicyUri : (secured ? ep.securityPolicyUri : "");
+                if (ownPolicy && !crypto::findPolicy(t.securityPolicyUri)) continue;
                 if (!anonymous && t.tokenType == UserTokenType::Anonymous) {
                     s.anonymousPolicyId = t.policyId;
                     anonymous = true;
-                } else if (!user && plain && t.tokenType == UserTokenType::UserName) {
+                } else if (!user && t.tokenType == UserTokenType::UserName) {
                     s.userNamePolicyId = t.policyId;
+                    s.userNameSecurityPolicyUri = policy;
                     user = true;
+                } else if (!certificate && t.tokenType == UserTokenType::Certificate) {
+                    s.certificatePolicyId = t.policyId;
+                    s.certificateSecurityPolicyUri = policy;
+                    certificate = true;
                 }
             }
         }
+    }
+
+    // The server's certificate, for encrypting a password / signing a user token: the one of
+    // the secured channel, else the chosen endpoint's.
+    std::optional<pki::Certificate> serverCertificate() const {
+        if (channelSecurity) return channelSecurity->serverCertificate;
+        if (endpoint && endpoint->serverCertificate.size() > 0) {
+            try {
+                return pki::Certificate::chainFromDer(
+                           crypto::ByteView(endpoint->serverCertificate.data(),
+                                            endpoint->serverCertificate.size()))
+                    .front();
+            } catch (const std::exception&) {
+            }
+        }
+        return std::nullopt;
     }
 
     ExtensionObject identityToken() const {
@@ -490,7 +562,34 @@ class Client::Impl {
             UserNameIdentityToken t{};
             t.policyId = session->userNamePolicyId;
             t.userName = u->user;
-            t.password = ByteString(u->password);
+            const crypto::SecurityPolicy* policy =
+                crypto::findPolicy(session->userNameSecurityPolicyUri);
+            const auto server = policy ? serverCertificate() : std::nullopt;
+            if (policy && server) {
+                // The legacy format every peer understands (Part 4 §7.41.2.2): length of
+                // password + nonce, the password, the server's last nonce; encrypted for the
+                // server's certificate.
+                const auto& nonce = session->serverNonce;
+                crypto::Bytes plain(4);
+                const auto length = static_cast<UInt32>(u->password.size() + nonce.size());
+                for (int i = 0; i < 4; ++i)
+                    plain[static_cast<std::size_t>(i)] = static_cast<Byte>(length >> (8 * i));
+                plain.insert(plain.end(), u->password.begin(), u->password.end());
+                plain.insert(plain.end(), nonce.data(), nonce.data() + nonce.size());
+                const auto cipher =
+                    crypto::encrypt(server->publicKey(), policy->asymmetricEncryption, plain);
+                t.password = ByteString(cipher.data(), cipher.size());
+                t.encryptionAlgorithm = std::string(policy->asymmetricEncryptionUri);
+            } else {
+                t.password = ByteString(u->password);
+            }
+            return toExtensionObject(t);
+        }
+        if (const auto* c = std::get_if<UserCertificate>(&identity)) {
+            X509IdentityToken t{};
+            t.policyId = session->certificatePolicyId;
+            const auto& der = c->identity.certificate.der();
+            t.certificateData = ByteString(der.data(), der.size());
             return toExtensionObject(t);
         }
         AnonymousIdentityToken t{};
@@ -498,10 +597,34 @@ class Client::Impl {
         return toExtensionObject(t);
     }
 
+    // sign(server certificate + server nonce) with `key`, by `policy`: the proof of a client
+    // (clientSignature) or of an X.509 user (userTokenSignature).
+    SignatureData signServerNonce(const crypto::SecurityPolicy& policy,
+                                  const crypto::PrivateKey& key) const {
+        SignatureData sig;
+        const auto server = serverCertificate();
+        if (!server) return sig;
+        crypto::Bytes data = server->der();
+        const auto& nonce = session->serverNonce;
+        data.insert(data.end(), nonce.data(), nonce.data() + nonce.size());
+        const auto signature = crypto::sign(key, policy.asymmetricSignature, data);
+        sig.algorithm = std::string(policy.asymmetricSignatureUri);
+        sig.signature = ByteString(signature.data(), signature.size());
+        return sig;
+    }
+
     void activateSession(Clock::time_point deadline, Completions& done) {
         ActivateSessionRequest req{};
         req.localeIds = config.localeIds;
         req.userIdentityToken = identityToken();
+        if (channelSecurity)
+            req.clientSignature =
+                signServerNonce(*channelSecurity->policy, channelSecurity->identity.key);
+        if (const auto* c = std::get_if<UserCertificate>(&identity)) {
+            const crypto::SecurityPolicy* policy =
+                crypto::findPolicy(session->certificateSecurityPolicyUri);
+            if (policy) req.userTokenSignature = signServerNonce(*policy, c->identity.key);
+        }
         ActivateSessionResponse resp = sessionCall(req, deadline, done);
         session->serverNonce = std::move(resp.serverNonce);
         sessionActive = true;
@@ -821,7 +944,33 @@ class Client::Impl {
 
 // ---------------------------------------------------------------------------------------------
 
-Client::Client(ClientConfig config) : impl_(std::make_unique<Impl>(std::move(config))) {}
+namespace {
+std::mutex defaultSecurityMutex;
+std::optional<DefaultSecurity> processDefaultSecurity;
+
+ClientConfig withDefaultSecurity(ClientConfig config) {
+    if (config.security || !config.useDefaultSecurity) return config;
+    std::lock_guard lock(defaultSecurityMutex);
+    if (!processDefaultSecurity) return config;
+    config.security = processDefaultSecurity->security;
+    config.applicationUri = processDefaultSecurity->applicationUri;
+    config.applicationName = processDefaultSecurity->applicationName;
+    return config;
+}
+}  // namespace
+
+void setDefaultSecurity(std::optional<DefaultSecurity> security) {
+    std::lock_guard lock(defaultSecurityMutex);
+    processDefaultSecurity = std::move(security);
+}
+
+std::optional<DefaultSecurity> defaultSecurity() {
+    std::lock_guard lock(defaultSecurityMutex);
+    return processDefaultSecurity;
+}
+
+Client::Client(ClientConfig config)
+    : impl_(std::make_unique<Impl>(withDefaultSecurity(std::move(config)))) {}
 
 Client::~Client() {
     if (!impl_) return;
@@ -856,14 +1005,92 @@ std::shared_ptr<SubscriptionEngine> Client::subscriptionEngine() {
 const ClientConfig& Client::config() const { return impl_->config; }
 const DecodeLimits& Client::decodeLimits() const { return impl_->config.decodeLimits; }
 
+namespace {
+// The most secure endpoint the client supports, accepts and trusts (Part 4 §5.4.4: the
+// client chooses), with the channel configuration for it. Throws Error.
+std::pair<EndpointDescription, std::shared_ptr<const transport::ClientSecurityConfig>>
+chooseEndpoint(const ClientSecurity& sec, const std::vector<EndpointDescription>& endpoints,
+               std::string_view url) {
+    std::vector<const EndpointDescription*> candidates;
+    for (const auto& ep : endpoints) {
+        if (!ep.transportProfileUri.empty() &&
+            ep.transportProfileUri !=
+                "http://opcfoundation.org/UA-Profile/Transport/uatcp-uasc-uabinary")
+            continue;
+        const bool none = ep.securityMode == MessageSecurityMode::None;
+        if (none) {
+            if (sec.allowNone) candidates.push_back(&ep);
+            continue;
+        }
+        if (!crypto::findPolicy(ep.securityPolicyUri)) continue;  // unknown or deprecated
+        if (!sec.policyUri.empty() && ep.securityPolicyUri != sec.policyUri) continue;
+        if (static_cast<int>(ep.securityMode) < static_cast<int>(sec.minimumMode)) continue;
+        candidates.push_back(&ep);
+    }
+    std::stable_sort(candidates.begin(), candidates.end(), [](const auto* a, const auto* b) {
+        if ((a->securityMode == MessageSecurityMode::None) !=
+            (b->securityMode == MessageSecurityMode::None))
+            return b->securityMode == MessageSecurityMode::None;
+        if (a->securityMode != b->securityMode) return a->securityMode > b->securityMode;
+        return a->securityLevel > b->securityLevel;
+    });
+    if (candidates.empty())
+        throw Error(status::BadSecurityPolicyRejected,
+                    "no endpoint of " + std::string(url) +
+                        " offers a security policy and mode this client accepts");
+    const EndpointDescription& ep = *candidates.front();
+    if (ep.securityMode == MessageSecurityMode::None) return {ep, nullptr};
+    std::vector<pki::Certificate> chain;
+    try {
+        chain = pki::Certificate::chainFromDer(
+            crypto::ByteView(ep.serverCertificate.data(), ep.serverCertificate.size()));
+    } catch (const std::exception& e) {
+        throw Error(status::BadCertificateInvalid,
+                    "the server certificate of " + std::string(url) + ": " + e.what());
+    }
+    if (chain.empty())
+        throw Error(status::BadCertificateInvalid,
+                    std::string(url) + " offers a secured endpoint without a certificate");
+    if (sec.trust) {
+        pki::ValidationOptions options;
+        options.applicationUri = ep.server.applicationUri;
+        const StatusCode st = sec.trust->validate(chain, options);
+        if (st.isBad())
+            throw Error(st, "the server certificate of " + std::string(url) + " (" +
+                                chain.front().subject() + ", thumbprint " +
+                                chain.front().thumbprintHex().substr(0, 16) +
+                                ") is not accepted; an operator trusts it with `pnp pki trust " +
+                                chain.front().thumbprintHex().substr(0, 16) + "`");
+    }
+    auto channel = std::make_shared<transport::ClientSecurityConfig>();
+    channel->policy = crypto::findPolicy(ep.securityPolicyUri);
+    channel->mode = ep.securityMode;
+    channel->identity = sec.identity;
+    channel->serverCertificate = chain.front();
+    return {ep, std::move(channel)};
+}
+}  // namespace
+
 void Client::connect(std::string_view endpointUrl, Identity identity, Deadline deadline) {
     Impl& s = *impl_;
+    const Clock::time_point dl = deadline.resolve(Clock::now(), s.config.connectTimeout);
+    std::optional<EndpointDescription> endpoint;
+    std::shared_ptr<const transport::ClientSecurityConfig> channelSecurity;
+    if (s.config.security) {
+        // Which endpoints the server offers: asked on a channel without security, then
+        // checked against what we accept and trust.
+        auto [ep, channel] = chooseEndpoint(*s.config.security,
+                                            getEndpoints(endpointUrl, Deadline(dl)), endpointUrl);
+        endpoint = std::move(ep);
+        channelSecurity = std::move(channel);
+    }
     Completions done(s.completions);
     std::lock_guard lock(s.mutex);
     if (s.wantConnected || s.conn) s.close(done);
-    Clock::time_point dl = deadline.resolve(Clock::now(), s.config.connectTimeout);
     s.url = std::string(endpointUrl);
     s.identity = std::move(identity);
+    s.endpoint = std::move(endpoint);
+    s.channelSecurity = std::move(channelSecurity);
     try {
         s.openChannel(dl);
         s.createSession(dl, done);
@@ -953,7 +1180,8 @@ void Client::sendAsync(EncodeRef encode, Deadline deadline, std::string_view ser
 }
 
 IncomingResponse Client::discoveryRoundTrip(std::string_view url, EncodeRef encode,
-                                            Deadline deadline, std::string_view service) {
+                                            Deadline deadline, std::string_view service,
+                                            bool secured) {
     Impl& s = *impl_;
     Clock::time_point dl;
     {
@@ -969,26 +1197,65 @@ IncomingResponse Client::discoveryRoundTrip(std::string_view url, EncodeRef enco
             return r;
         }
     }
-    // A temporary connection, without a session and without the client's lock.
-    try {
-        auto c = transport::ClientConnection::connect(std::string(url), s.config.transport, dl);
-        Clock::time_point now = Clock::now();
+    // A temporary connection, without a session and without the client's lock — or the one
+    // kept from the last request to this URL (keepDiscoveryConnection).
+    const bool secure = secured && s.config.security;
+    auto exchange = [&](transport::ClientConnection& c) {
+        const Clock::time_point now = Clock::now();
         Buffer buffer = transport::ClientConnection::newMessageBuffer();
         RequestHeader h{};
         h.timestamp = DateTime::now();
         h.requestHandle = 1;
         h.timeoutHint = timeoutHint(now, dl);
         encode(buffer, h);
-        UInt32 id = c->send(std::move(buffer), dl);
+        const UInt32 id = c.send(std::move(buffer), dl);
         for (;;) {
-            auto m = c->receive(dl);
+            auto m = c.receive(dl);
             if (!m) throw Error(status::BadTimeout, std::string(service) + " timed out");
             if (m->requestId == id) {
                 m->body.own();  // outlives the connection
-                c->close();
                 return std::move(*m);
             }
         }
+    };
+    auto keep = [&](std::unique_ptr<transport::ClientConnection> c) {
+        std::lock_guard lock(s.discoveryMutex);
+        s.discoveryConnection = std::move(c);  // the one before is closed
+        s.discoveryUrl = std::string(url);
+        s.discoverySecured = secure;
+    };
+    if (s.config.keepDiscoveryConnection) {
+        std::unique_ptr<transport::ClientConnection> kept;
+        {
+            std::lock_guard lock(s.discoveryMutex);
+            if (s.discoveryConnection && s.discoveryUrl == url && s.discoverySecured == secure &&
+                s.discoveryConnection->isOpen())
+                kept = std::move(s.discoveryConnection);
+        }
+        if (kept) {
+            try {
+                IncomingResponse r = exchange(*kept);
+                keep(std::move(kept));
+                return r;
+            } catch (const TransportError&) {
+                // Closed meanwhile (idle, the server restarted): a new one below.
+            }
+        }
+    }
+    transport::ClientConfig transport = s.config.transport;
+    if (secure) {
+        auto [ep, channel] =
+            chooseEndpoint(*s.config.security, getEndpoints(url, Deadline(dl)), url);
+        transport.security = std::move(channel);
+    }
+    try {
+        auto c = transport::ClientConnection::connect(std::string(url), transport, dl);
+        IncomingResponse r = exchange(*c);
+        if (s.config.keepDiscoveryConnection)
+            keep(std::move(c));
+        else
+            c->close();
+        return r;
     } catch (const TransportError& e) {
         throw Error(e.status(),
                     std::string(service) + " at " + std::string(url) + ": " + e.message());

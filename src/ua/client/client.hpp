@@ -309,8 +309,11 @@ class Client {
                    std::string_view service);
     void sendAsync(EncodeRef encode, Deadline deadline, std::string_view service,
                    RawCallback callback);
+    // secured: a temporary connection uses the client's security, if it has one (Part 4
+    // §5.4.5: RegisterServer is only accepted over a channel that authenticates the server).
     transport::IncomingResponse discoveryRoundTrip(std::string_view url, EncodeRef encode,
-                                                   Deadline deadline, std::string_view service);
+                                                   Deadline deadline, std::string_view service,
+                                                   bool secured = false);
     const DecodeLimits& decodeLimits() const;
 
     template <class Resp>
@@ -333,7 +336,9 @@ Resp Client::decodeIncoming(const transport::IncomingResponse& r, std::string_vi
 template <class Req, class Resp>
 Resp Client::discoveryRequest(std::string_view url, Req req, Deadline deadline) {
     constexpr std::string_view service = detail::serviceName<Req>();
-    auto r = discoveryRoundTrip(url, encoderFor(req), deadline, service);
+    constexpr bool secured =
+        std::is_same_v<Req, RegisterServerRequest> || std::is_same_v<Req, RegisterServer2Request>;
+    auto r = discoveryRoundTrip(url, encoderFor(req), deadline, service, secured);
     return decodeIncoming<Resp>(r, service, decodeLimits());
 }
 

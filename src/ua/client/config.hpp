@@ -2,10 +2,14 @@
 #pragma once
 
 #include <chrono>
+#include <memory>
+#include <optional>
 #include <string>
 #include <variant>
 #include <vector>
 
+#include "ua/crypto/crypto.hpp"
+#include "ua/pki/pki.hpp"
 #include "ua/transport/client_connection.hpp"
 #include "ua/types/binary.hpp"
 
@@ -26,7 +30,32 @@ struct UserName {
     bool operator==(const UserName&) const = default;
 };
 
-using Identity = std::variant<Anonymous, UserName>;
+// An X.509 user certificate and its key (X509IdentityToken): the key signs the server's
+// certificate and nonce; it never leaves the client.
+struct UserCertificate {
+    pki::Identity identity;
+    bool operator==(const UserCertificate& o) const {
+        return identity.certificate == o.identity.certificate;
+    }
+};
+
+using Identity = std::variant<Anonymous, UserName, UserCertificate>;
+
+// A client's security (docs/security.md). With it, connect() asks the server for its
+// endpoints, takes the most secure one it supports and trusts, opens a secured channel and
+// proves its identity in the session; user passwords are encrypted for the server.
+struct ClientSecurity {
+    pki::Identity identity;  // the client's application instance certificate and key
+    // Validates server certificates (untrusted ones land in its rejected/ folder). Null:
+    // every server certificate is accepted — for tests only.
+    std::shared_ptr<pki::CertificateStore> trust;
+    // Restricts the choice: a policy URI (empty: any supported) and the least mode accepted.
+    std::string policyUri;
+    MessageSecurityMode minimumMode = MessageSecurityMode::SignAndEncrypt;
+    // Accept an endpoint with SecurityPolicy None when the server offers nothing better
+    // (e.g. an old server). Off: such a server is refused with BadSecurityPolicyRejected.
+    bool allowNone = false;
+};
 
 // What happens when the connection drops (see Client for the whole story).
 struct ReconnectPolicy {
@@ -76,11 +105,35 @@ struct ClientConfig {
 
     ReconnectPolicy reconnect;
 
+    // The connection discoveryRequest() / getEndpoints() open to a URL other than the
+    // session's stays open for the next request to the same URL, instead of a new
+    // (secure) channel each time: for a registrar renewing every few hundred ms. One caller
+    // at a time uses it.
+    bool keepDiscoveryConnection = false;
+
+    // Secured connections; absent: the process's default security (below) if it has one and
+    // useDefaultSecurity is on, else SecurityPolicy None.
+    std::optional<ClientSecurity> security;
+    bool useDefaultSecurity = true;
+
     // Buffer sizes and message limits of the transport (HEL/ACK negotiation), send timeout.
     // Its requestedLifetime is replaced by secureChannelLifetime above.
     transport::ClientConfig transport;
     // Limits applied when decoding responses.
     DecodeLimits decodeLimits;
 };
+
+// The process's default security: pnp's applications set it once at start-up from the
+// machine's PKI folder (docs/security.md), so that every client they make — the skill
+// detector's, a component's, the registrar's — connects securely without being told.
+// Libraries and unit tests leave it unset. The application description goes with the
+// identity: CreateSession's ApplicationUri must be the one in the certificate.
+struct DefaultSecurity {
+    ClientSecurity security;
+    std::string applicationUri;
+    std::string applicationName;
+};
+void setDefaultSecurity(std::optional<DefaultSecurity> security);
+std::optional<DefaultSecurity> defaultSecurity();
 
 }  // namespace pnp::ua::client

@@ -103,11 +103,18 @@ bool Registrar::registerWith(const std::string& url, bool online) {
     mdnsConfig.serverCapabilities = config_.capabilities;
     req.discoveryConfiguration = {toExtensionObject(mdnsConfig)};
     try {
-        client::ClientConfig cc;
-        cc.requestTimeout = config_.requestTimeout;
-        cc.connectTimeout = config_.requestTimeout;
-        client::Client c(cc);
-        c.discoveryRequest(url, std::move(req), config_.requestTimeout);
+        if (!client_) {
+            client::ClientConfig cc;
+            cc.requestTimeout = config_.requestTimeout;
+            cc.connectTimeout = config_.connectTimeout;
+            // One (secured) channel to the LDS-ME for all renewals, not one per renewal.
+            cc.keepDiscoveryConnection = true;
+            client_ = std::make_unique<client::Client>(cc);
+        }
+        // A registration may have to open the secured channel first; leaving (stop(), a move to
+        // another LDS-ME) stays within requestTimeout.
+        client_->discoveryRequest(url, std::move(req),
+                                  online ? config_.connectTimeout : config_.requestTimeout);
         return true;
     } catch (const std::exception&) {
         return false;  // tried again after retryInterval

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "mdns/mdns.hpp"
+#include "ua/client/client.hpp"
 #include "ua/discovery/browsing_worker.hpp"
 
 namespace pnp::ua::server {
@@ -48,6 +49,9 @@ struct RegistrarConfig {
     std::chrono::milliseconds interval{500};
     std::chrono::milliseconds retryInterval{100};  // after a failed registration
     std::chrono::milliseconds requestTimeout{1000};
+    // Opening the (secured) channel to the LDS-ME: GetEndpoints and OpenSecureChannel with
+    // RSA on both sides.
+    std::chrono::milliseconds connectTimeout{3000};
 };
 
 class Registrar {
@@ -83,6 +87,8 @@ class Registrar {
     std::string current_;
     std::string registeredWith_;
     std::uint64_t registrations_ = 0;
+    // Used by the worker thread (and by stop() once it ended) only.
+    std::unique_ptr<client::Client> client_;
     std::function<void(const std::string&)> onLdsChanged_;
     BrowsingWorker worker_;  // last: stopped before the rest goes
 };

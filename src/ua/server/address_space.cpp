@@ -233,6 +233,7 @@ void AddressSpace::Impl::deleteNode(NodeIndex i, bool children) {
     m.extra.reset();
     methods.erase(i);
     methodDeclarations.erase(i);
+    if (permissions.nodes.erase(i) != 0) permissions.update();
     unregisterId(i);
     m.flags = 0;
     --liveNodes;
@@ -855,6 +856,94 @@ void AddressSpace::deleteNode(const NodeId& id, bool deleteChildren) {
     auto lock = impl_->lockForChange();
     NodeIndex i = need(*impl_, id, status::BadNodeIdUnknown, "node");
     impl_->deleteNode(i, deleteChildren);
+}
+
+// ---- roles and permissions -------------------------------------------------------------------
+namespace {
+std::shared_ptr<const RolePermissionSet> prepared(
+    std::optional<std::vector<RolePermissionType>> p) {
+    if (!p) return nullptr;
+    return std::make_shared<const RolePermissionSet>(std::move(*p));
+}
+}  // namespace
+
+void AddressSpace::applyPermissions(const PermissionDefaults& p) {
+    auto lock = impl_->lockForValueChange();
+    Impl::Permissions next;
+    next.serverDefault = prepared(p.serverDefault);
+    for (const auto& [ns, list] : p.namespaceDefaults) next.namespaces[ns] = prepared(list);
+    for (const auto& [id, list] : p.nodes) {
+        NodeIndex i = impl_->find(id);
+        if (i == kNoNode) continue;  // e.g. a policy naming optional ns0 nodes
+        next.nodes[i] = prepared(list);
+    }
+    for (const auto& r : p.encryptionRequired) {
+        int bit = wellKnownRoleBit(r);
+        if (bit >= 0) next.encryptionRequired |= 1u << bit;
+    }
+    next.update();
+    impl_->permissions = std::move(next);
+}
+
+void AddressSpace::setRolePermissions(const NodeId& node,
+                                      std::optional<std::vector<RolePermissionType>> permissions) {
+    auto lock = impl_->lockForValueChange();
+    NodeIndex i = impl_->find(node);
+    if (i == kNoNode) throw AddressSpaceError(status::BadNodeIdUnknown, node.toString());
+    if (permissions)
+        impl_->permissions.nodes[i] = prepared(std::move(permissions));
+    else
+        impl_->permissions.nodes.erase(i);
+    impl_->permissions.update();
+}
+
+void AddressSpace::setNamespaceDefaultRolePermissions(
+    UInt16 namespaceIndex, std::optional<std::vector<RolePermissionType>> permissions) {
+    auto lock = impl_->lockForValueChange();
+    if (permissions)
+        impl_->permissions.namespaces[namespaceIndex] = prepared(std::move(permissions));
+    else
+        impl_->permissions.namespaces.erase(namespaceIndex);
+    impl_->permissions.update();
+}
+
+void AddressSpace::setDefaultRolePermissions(
+    std::optional<std::vector<RolePermissionType>> permissions) {
+    auto lock = impl_->lockForValueChange();
+    impl_->permissions.serverDefault = prepared(std::move(permissions));
+    impl_->permissions.update();
+}
+
+void AddressSpace::requireEncryptedChannel(const NodeId& role) {
+    int bit = wellKnownRoleBit(role);
+    if (bit < 0)
+        throw AddressSpaceError(status::BadInvalidArgument,
+                                "only well-known roles can require encryption");
+    auto lock = impl_->lockForValueChange();
+    impl_->permissions.encryptionRequired |= 1u << bit;
+}
+
+bool AddressSpace::enforcesPermissions() const {
+    std::shared_lock lock(impl_->mutex);
+    return impl_->permissions.active;
+}
+
+UInt32 AddressSpace::userPermissions(const NodeId& node, const SessionIdentity& user) const {
+    std::shared_lock lock(impl_->mutex);
+    NodeIndex i = impl_->find(node);
+    if (i == kNoNode) return 0;
+    return impl_->userPermissions(i, &user);
+}
+
+AddressSpace::EffectivePermissions AddressSpace::effectivePermissions(const NodeId& node) const {
+    std::shared_lock lock(impl_->mutex);
+    EffectivePermissions out;
+    if (!impl_->permissions.active) return out;
+    NodeIndex i = impl_->find(node);
+    if (i == kNoNode) return out;
+    if (const auto* set = impl_->permissionSetOf(i)) out.set = *set;
+    out.encryptionRequired = impl_->permissions.encryptionRequired;
+    return out;
 }
 
 std::uint64_t AddressSpace::structureGeneration() const {

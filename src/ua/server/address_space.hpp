@@ -28,11 +28,16 @@
 // it must be fast and must not block. Long-running methods complete asynchronously (see
 // MethodHandler).
 //
-// Not modelled: RolePermissions, UserRolePermissions and AccessRestrictions (reading them is
-// Bad_AttributeIdInvalid); the User* attributes equal their non-user counterparts (per-user
-// access control belongs to the session layer); a Browse with a View accepts any existing
-// View node but does not restrict the references to it; values are always current (maxAge
-// is accepted and ignored).
+// Roles and permissions (ua/server/roles.hpp): the services take the calling session's
+// identity (null: a local call, nothing is checked). Once permissions are configured
+// (applyPermissions, setRolePermissions, ...) Browse leaves out the nodes the session may not
+// browse, Read, Write and Call answer Bad_UserAccessDenied where the session lacks the
+// permission, and UserAccessLevel, UserExecutable, UserWriteMask and UserRolePermissions are
+// answered per session. Without any configured the checks are skipped altogether.
+//
+// Not modelled: AccessRestrictions (reading it is Bad_AttributeIdInvalid); a Browse with a
+// View accepts any existing View node but does not restrict the references to it; values are
+// always current (maxAge is accepted and ignored).
 #pragma once
 
 #include <atomic>
@@ -52,6 +57,7 @@
 
 #include "ua/server/node.hpp"
 #include "ua/server/numeric_range.hpp"
+#include "ua/server/roles.hpp"
 #include "ua/types/ns0_ids_data_types.hpp"
 #include "ua/types/ns0_ids_object_types.hpp"
 #include "ua/types/ns0_ids_reference_types.hpp"
@@ -379,24 +385,56 @@ class AddressSpace {
     using ValueListener = std::function<void(const NodeId& node, const DataValue& value)>;
     void setValueListener(ValueListener listener);
 
+    // ---- roles and permissions (ua/server/roles.hpp) ----------------------------------
+    // Replaces every permission setting by `p` (e.g. pnpRolePolicy()).
+    void applyPermissions(const PermissionDefaults& p);
+    // A node's RolePermissions attribute (nullopt: none, the namespace's or the server's
+    // default applies). Throws AddressSpaceError for an unknown node.
+    void setRolePermissions(const NodeId& node,
+                            std::optional<std::vector<RolePermissionType>> permissions);
+    // A namespace's DefaultRolePermissions (nullopt: none, the server's default applies).
+    void setNamespaceDefaultRolePermissions(
+        UInt16 namespaceIndex, std::optional<std::vector<RolePermissionType>> permissions);
+    // The server-wide default (nullopt: every session may do everything).
+    void setDefaultRolePermissions(std::optional<std::vector<RolePermissionType>> permissions);
+    // The role counts only for sessions on a SignAndEncrypt channel.
+    void requireEncryptedChannel(const NodeId& role);
+    // Whether any permission is configured (false: the services check nothing).
+    bool enforcesPermissions() const;
+    // The session's permissions on a node (PermissionType bits); 0 for an unknown node.
+    UInt32 userPermissions(const NodeId& node, const SessionIdentity& user) const;
+    // The rules in force for a node, for checks made outside the address space's lock (the
+    // subscription engine's events): null when everything is allowed.
+    struct EffectivePermissions {
+        std::shared_ptr<const RolePermissionSet> set;
+        std::uint32_t encryptionRequired = 0;
+        UInt32 of(const SessionIdentity& user) const {
+            return set ? set->permissionsOf(user, encryptionRequired) : permission::All;
+        }
+    };
+    EffectivePermissions effectivePermissions(const NodeId& node) const;
+
     // ---- services ---------------------------------------------------------------------
-    BrowseResponse browse(const BrowseRequest& request, ContinuationPointStore& points) const;
-    BrowseNextResponse browseNext(const BrowseNextRequest& request,
-                                  ContinuationPointStore& points) const;
+    // `user`: the calling session (null: no permission checks).
+    BrowseResponse browse(const BrowseRequest& request, ContinuationPointStore& points,
+                          const SessionIdentity* user = nullptr) const;
+    BrowseNextResponse browseNext(const BrowseNextRequest& request, ContinuationPointStore& points,
+                                  const SessionIdentity* user = nullptr) const;
     TranslateBrowsePathsToNodeIdsResponse translateBrowsePaths(
-        const TranslateBrowsePathsToNodeIdsRequest& request) const;
+        const TranslateBrowsePathsToNodeIdsRequest& request,
+        const SessionIdentity* user = nullptr) const;
     RegisterNodesResponse registerNodes(const RegisterNodesRequest& request) const;
     UnregisterNodesResponse unregisterNodes(const UnregisterNodesRequest& request) const;
-    ReadResponse read(const ReadRequest& request) const;
-    WriteResponse write(const WriteRequest& request);
+    ReadResponse read(const ReadRequest& request, const SessionIdentity* user = nullptr) const;
+    WriteResponse write(const WriteRequest& request, const SessionIdentity* user = nullptr);
     // Checks every call, runs the handlers and invokes `done` once all of them completed:
     // before call() returns when every handler completed synchronously, otherwise on the
     // thread of the last completion (the session layer posts it back to its own thread).
     // The rvalue form hands the input arguments to the handlers without copying them.
     void call(CallRequest&& request, const NodeId& sessionId,
-              std::function<void(CallResponse)> done);
+              std::function<void(CallResponse)> done, const SessionIdentity* user = nullptr);
     void call(const CallRequest& request, const NodeId& sessionId,
-              std::function<void(CallResponse)> done);
+              std::function<void(CallResponse)> done, const SessionIdentity* user = nullptr);
     // Blocks until every method completed (for application threads and tests; never call it
     // on the network thread with asynchronous handlers).
     CallResponse callSync(const CallRequest& request, const NodeId& sessionId = {});
@@ -406,10 +444,11 @@ class AddressSpace {
                         ContinuationPointStore& points) const;
     BrowsePathResult translateBrowsePath(const BrowsePath& path) const;
     DataValue read(const ReadValueId& item,
-                   TimestampsToReturn timestamps = TimestampsToReturn::Neither) const;
+                   TimestampsToReturn timestamps = TimestampsToReturn::Neither,
+                   const SessionIdentity* user = nullptr) const;
     DataValue readAttribute(const NodeId& id, AttributeId attribute,
                             std::string_view indexRange = {}) const;
-    StatusCode write(const WriteValue& item);
+    StatusCode write(const WriteValue& item, const SessionIdentity* user = nullptr);
     StatusCode writeAttribute(const NodeId& id, AttributeId attribute, const Variant& value);
 
     // ---- type checks (exposed for the session layer and tests) -------------------------

@@ -210,6 +210,39 @@ struct AddressSpace::Impl {
         return (h != methods.end() && h->second && *h->second) ? h->second : nullptr;
     }
 
+    // ---- roles and permissions (address_space.cpp) --------------------------------------------
+    struct Permissions {
+        bool active = false;  // anything configured (else nothing is checked)
+        std::shared_ptr<const RolePermissionSet> serverDefault;
+        std::unordered_map<UInt16, std::shared_ptr<const RolePermissionSet>> namespaces;
+        std::unordered_map<NodeIndex, std::shared_ptr<const RolePermissionSet>> nodes;
+        std::uint32_t encryptionRequired = 0;  // role bits
+        void update() { active = serverDefault || !namespaces.empty() || !nodes.empty(); }
+    } permissions;
+    // The rules for node i (null: everything allowed). Lock held.
+    const std::shared_ptr<const RolePermissionSet>* permissionSetOf(NodeIndex i) const {
+        if (!permissions.nodes.empty()) {
+            auto it = permissions.nodes.find(i);
+            if (it != permissions.nodes.end()) return &it->second;
+        }
+        if (!permissions.namespaces.empty()) {
+            auto it = permissions.namespaces.find(nodes[i].ns);
+            if (it != permissions.namespaces.end()) return &it->second;
+        }
+        return permissions.serverDefault ? &permissions.serverDefault : nullptr;
+    }
+    // The session's permissions on node i; everything for local calls (user null) and while
+    // no permission is configured. Lock held.
+    UInt32 userPermissions(NodeIndex i, const SessionIdentity* user) const {
+        if (user == nullptr || !permissions.active) return permission::All;
+        const auto* set = permissionSetOf(i);
+        return set ? (*set)->permissionsOf(*user, permissions.encryptionRequired)
+                   : permission::All;
+    }
+    bool checksPermissions(const SessionIdentity* user) const {
+        return user != nullptr && permissions.active;
+    }
+
     // ---- NodeSet blobs (nodeset_loader.cpp) -------------------------------------------------
     void loadNodeSet(const Byte* blob, std::size_t size);
 
@@ -217,7 +250,8 @@ struct AddressSpace::Impl {
     // Reads an attribute; the lock is held shared on entry and may be released for a read
     // callback (`lock` is the caller's lock).
     DataValue readAttribute(std::shared_lock<std::shared_mutex>& lock, const ReadValueId& item,
-                            TimestampsToReturn timestamps) const;
+                            TimestampsToReturn timestamps,
+                            const SessionIdentity* user = nullptr) const;
     StatusCode checkValue(const Variant& v, NodeIndex dataType, Int32 valueRank,
                           std::span<const UInt32> arrayDimensions, bool allowEmpty) const;
     bool builtinMatches(BuiltinType b, const Variant& v, NodeIndex dataType) const;
@@ -234,7 +268,7 @@ struct AddressSpace::Impl {
     mutable std::mutex argumentCacheMutex;
     mutable std::unordered_map<NodeIndex, CachedArguments> argumentCache;
     StatusCode writeAttribute(std::unique_lock<std::shared_mutex>& lock, const WriteValue& item,
-                              bool checkAccess);
+                              bool checkAccess, const SessionIdentity* user = nullptr);
 
     // ---- browse (view_services.cpp) -----------------------------------------------------------
     ReferenceDescription describe(const Ref& r, UInt32 resultMask) const;

@@ -48,6 +48,33 @@ void applyTimestamps(DataValue& v, TimestampsToReturn ts, DateTime now) {
     }
 }
 
+// UserAccessLevel = AccessLevel masked by the session's permissions (OPC 10000-3 §8.55).
+Byte userAccessLevelOf(UInt32 perms) {
+    if (perms == permission::All) return 0xFF;
+    Byte keep = access_level::SemanticChange;
+    if (perms & permission::Read) keep |= access_level::CurrentRead;
+    if (perms & permission::Write)
+        keep |= access_level::CurrentWrite | access_level::StatusWrite |
+                access_level::TimestampWrite;
+    if (perms & permission::ReadHistory) keep |= access_level::HistoryRead;
+    if (perms & (permission::InsertHistory | permission::ModifyHistory | permission::DeleteHistory))
+        keep |= access_level::HistoryWrite;
+    return keep;
+}
+
+// UserWriteMask = WriteMask masked: RolePermissions needs WriteRolePermissions, Historizing
+// WriteHistorizing, the other attributes WriteAttribute.
+constexpr UInt32 kWriteMaskRolePermissions = 1u << 23;
+UInt32 userWriteMaskOf(UInt32 perms) {
+    if (perms == permission::All) return 0xFFFFFFFFu;
+    UInt32 keep = 0;
+    if (perms & permission::WriteAttribute)
+        keep |= ~(kWriteMaskRolePermissions | write_mask::Historizing);
+    if (perms & permission::WriteRolePermissions) keep |= kWriteMaskRolePermissions;
+    if (perms & permission::WriteHistorizing) keep |= write_mask::Historizing;
+    return keep;
+}
+
 DataValue bad(StatusCode s) {
     DataValue v;
     v.status = s;
@@ -307,11 +334,23 @@ StatusCode AddressSpace::checkValue(const Variant& value, const NodeId& dataType
 // ---- Read ----------------------------------------------------------------------------------
 DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>& lock,
                                             const ReadValueId& item,
-                                            TimestampsToReturn timestamps) const {
+                                            TimestampsToReturn timestamps,
+                                            const SessionIdentity* user) const {
     const NodeIndex i = find(item.nodeId);
     if (i == kNoNode) return bad(status::BadNodeIdUnknown);
     const auto attr = static_cast<AttributeId>(item.attributeId);
     const Node& n = nodes[i];
+    // The session's permissions (OPC 10000-3 §8.55): Read for the Value, ReadRolePermissions
+    // for RolePermissions, Browse for the other attributes.
+    const bool checked = checksPermissions(user);
+    const UInt32 perms = checked ? userPermissions(i, user) : permission::All;
+    if (checked) {
+        const UInt32 needed = attr == AttributeId::Value             ? permission::Read
+                              : attr == AttributeId::RolePermissions ? permission::ReadRolePermissions
+                              : attr == AttributeId::UserRolePermissions ? 0u
+                                                                         : permission::Browse;
+        if ((perms & needed) != needed) return bad(status::BadUserAccessDenied);
+    }
 
     if (!item.dataEncoding.name.empty() || item.dataEncoding.namespaceIndex != 0) {
         const auto& name = item.dataEncoding.name;
@@ -386,7 +425,7 @@ DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>&
             v = Variant(n.writeMask);
             break;
         case AttributeId::UserWriteMask:
-            v = Variant(n.userWriteMask);
+            v = Variant(n.userWriteMask & userWriteMaskOf(perms));
             break;
         case AttributeId::IsAbstract:
             if (!isType(n)) return invalid();
@@ -433,7 +472,7 @@ DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>&
             if (attr == AttributeId::AccessLevel)
                 v = Variant(n.extra->accessLevel);
             else if (attr == AttributeId::UserAccessLevel)
-                v = Variant(n.extra->userAccessLevel);
+                v = Variant(static_cast<Byte>(n.extra->userAccessLevel & userAccessLevelOf(perms)));
             else if (attr == AttributeId::AccessLevelEx)
                 v = Variant(static_cast<UInt32>(n.extra->accessLevel));
             else if (attr == AttributeId::MinimumSamplingInterval)
@@ -447,15 +486,32 @@ DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>&
             break;
         case AttributeId::UserExecutable:
             if (cls != NodeClassBits::Method) return invalid();
-            v = Variant(n.has(Node::kUserExecutable));
+            v = Variant(n.has(Node::kUserExecutable) && (perms & permission::Call) != 0);
             break;
+        case AttributeId::RolePermissions:
+        case AttributeId::UserRolePermissions: {
+            // Only where permissions are configured (before: not modelled at all).
+            if (!permissions.active) return invalid();
+            const auto* set = permissionSetOf(i);
+            std::vector<RolePermissionType> list;
+            if (set && attr == AttributeId::RolePermissions)
+                list = (*set)->entries();
+            else if (set)
+                list = user ? (*set)->entriesOf(*user, permissions.encryptionRequired)
+                            : (*set)->entries();
+            std::vector<ExtensionObject> encoded;
+            encoded.reserve(list.size());
+            for (const auto& e : list) encoded.push_back(toExtensionObject(e));
+            v = Variant(std::move(encoded));
+            break;
+        }
         case AttributeId::DataTypeDefinition:
             if (cls != NodeClassBits::DataType || !n.extra || n.extra->value.empty())
                 return invalid();
             v = decodeDefinition(n);
             break;
         default:
-            // RolePermissions, UserRolePermissions, AccessRestrictions are not modelled.
+            // AccessRestrictions is not modelled.
             return invalid();
     }
     DataValue dv;
@@ -472,7 +528,7 @@ DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>&
     return dv;
 }
 
-ReadResponse AddressSpace::read(const ReadRequest& request) const {
+ReadResponse AddressSpace::read(const ReadRequest& request, const SessionIdentity* user) const {
     ReadResponse response;
     const auto ts = static_cast<Int32>(request.timestampsToReturn);
     if (request.nodesToRead.empty()) {
@@ -490,15 +546,17 @@ ReadResponse AddressSpace::read(const ReadRequest& request) const {
     response.results.reserve(request.nodesToRead.size());
     std::shared_lock lock(impl_->mutex);
     for (const auto& item : request.nodesToRead)
-        response.results.push_back(impl_->readAttribute(lock, item, request.timestampsToReturn));
+        response.results.push_back(
+            impl_->readAttribute(lock, item, request.timestampsToReturn, user));
     return response;
 }
 
-DataValue AddressSpace::read(const ReadValueId& item, TimestampsToReturn timestamps) const {
+DataValue AddressSpace::read(const ReadValueId& item, TimestampsToReturn timestamps,
+                            const SessionIdentity* user) const {
     const auto ts = static_cast<Int32>(timestamps);
     if (ts < 0 || ts > 3) return bad(status::BadTimestampsToReturnInvalid);
     std::shared_lock lock(impl_->mutex);
-    return impl_->readAttribute(lock, item, timestamps);
+    return impl_->readAttribute(lock, item, timestamps, user);
 }
 
 DataValue AddressSpace::readAttribute(const NodeId& id, AttributeId attribute,
@@ -512,13 +570,24 @@ DataValue AddressSpace::readAttribute(const NodeId& id, AttributeId attribute,
 
 // ---- Write ---------------------------------------------------------------------------------
 StatusCode AddressSpace::Impl::writeAttribute(std::unique_lock<std::shared_mutex>& lock,
-                                              const WriteValue& item, bool checkAccess) {
+                                              const WriteValue& item, bool checkAccess,
+                                              const SessionIdentity* user) {
     NodeIndex i = find(item.nodeId);
     if (i == kNoNode) return status::BadNodeIdUnknown;
     const auto attr = static_cast<AttributeId>(item.attributeId);
     if (item.attributeId == 0 || item.attributeId > static_cast<UInt32>(AttributeId::AccessLevelEx))
         return status::BadAttributeIdInvalid;
     const DataValue& dv = item.value;
+    if (checksPermissions(user)) {
+        // Write for the Value, WriteHistorizing / WriteRolePermissions for those, WriteAttribute
+        // for the others (OPC 10000-3 §8.55).
+        const UInt32 needed = attr == AttributeId::Value         ? permission::Write
+                              : attr == AttributeId::Historizing ? permission::WriteHistorizing
+                              : attr == AttributeId::RolePermissions
+                                  ? permission::WriteRolePermissions
+                                  : permission::WriteAttribute;
+        if ((userPermissions(i, user) & needed) != needed) return status::BadUserAccessDenied;
+    }
 
     if (attr != AttributeId::Value) {
         Node& n = nodes[i];
@@ -720,7 +789,7 @@ StatusCode AddressSpace::Impl::writeAttribute(std::unique_lock<std::shared_mutex
     return kGood;
 }
 
-WriteResponse AddressSpace::write(const WriteRequest& request) {
+WriteResponse AddressSpace::write(const WriteRequest& request, const SessionIdentity* user) {
     WriteResponse response;
     if (request.nodesToWrite.empty()) {
         response.responseHeader.serviceResult = status::BadNothingToDo;
@@ -729,13 +798,13 @@ WriteResponse AddressSpace::write(const WriteRequest& request) {
     response.results.reserve(request.nodesToWrite.size());
     auto lock = impl_->lockForValueChange();
     for (const auto& item : request.nodesToWrite)
-        response.results.push_back(impl_->writeAttribute(lock, item, true));
+        response.results.push_back(impl_->writeAttribute(lock, item, true, user));
     return response;
 }
 
-StatusCode AddressSpace::write(const WriteValue& item) {
+StatusCode AddressSpace::write(const WriteValue& item, const SessionIdentity* user) {
     auto lock = impl_->lockForValueChange();
-    return impl_->writeAttribute(lock, item, true);
+    return impl_->writeAttribute(lock, item, true, user);
 }
 
 StatusCode AddressSpace::writeAttribute(const NodeId& id, AttributeId attribute,

@@ -339,18 +339,33 @@ StatusCode LocalDiscovery::apply(Registration reg) {
     return status::Good;
 }
 
-void LocalDiscovery::registerServer(const RegisterServerRequest& req,
-                                    RegisterServerResponse& resp) {
-    StatusCode st = config_.allowInsecureRegistration ? validate(req.server)
-                                                      : status::BadSecurityModeInsufficient;
+namespace {
+// Whether a registration may go on: over a secured channel only for the server its
+// certificate names; over None only where insecure registration is allowed.
+StatusCode registrationAllowed(const RegisteredServer& server,
+                               const RegistrationChannel& channel,
+                               bool allowInsecure) {
+    if (!channel.secured) return allowInsecure ? status::Good : status::BadSecurityModeInsufficient;
+    const auto& uris = channel.certificateUris;
+    return std::find(uris.begin(), uris.end(), server.serverUri) != uris.end()
+               ? status::Good
+               : status::BadServerUriInvalid;
+}
+}  // namespace
+
+void LocalDiscovery::registerServer(const RegisterServerRequest& req, RegisterServerResponse& resp,
+                                    const RegistrationChannel& channel) {
+    StatusCode st = registrationAllowed(req.server, channel, config_.allowInsecureRegistration);
+    if (st.isGood()) st = validate(req.server);
     if (st.isGood()) st = apply(Registration{req.server, std::nullopt});
     resp.responseHeader.serviceResult = st;
 }
 
 void LocalDiscovery::registerServer2(const RegisterServer2Request& req,
-                                     RegisterServer2Response& resp) {
-    StatusCode st = config_.allowInsecureRegistration ? validate(req.server)
-                                                      : status::BadSecurityModeInsufficient;
+                                     RegisterServer2Response& resp,
+                                     const RegistrationChannel& channel) {
+    StatusCode st = registrationAllowed(req.server, channel, config_.allowInsecureRegistration);
+    if (st.isGood()) st = validate(req.server);
     if (st.isGood() && req.discoveryConfiguration.size() > config_.maxListLength)
         st = status::BadTooManyOperations;
     if (st.isBad()) {

@@ -41,9 +41,10 @@ struct DiscoveryConfig {
     // Produce wants a crashed device gone within seconds.
     std::chrono::milliseconds registrationExpiry{2000};
     std::size_t maxRegisteredServers = 10000;
-    // Part 4 §5.4.5 wants RegisterServer over a signed (or signed and encrypted) channel. The
-    // stack has SecurityPolicy None only, so true accepts registrations over it; false refuses
-    // them (BadSecurityModeInsufficient) until secure channels exist.
+    // Part 4 §5.4.5 wants RegisterServer over a signed (or signed and encrypted) channel,
+    // whose certificate names the registered ServerUri (else BadServerUriInvalid). true also
+    // accepts registrations over SecurityPolicy None (a server without security); false
+    // refuses them (BadSecurityModeInsufficient). pnp's secured LDS sets it to false.
     bool allowInsecureRegistration = true;
     // This server's own capability identifiers (Part 12 Annex D: "LDS", "DA", "NA", ...).
     // "LDS" is added when localDiscoveryServer is on.
@@ -90,6 +91,13 @@ struct NetworkRecord {
     std::vector<std::string> serverCapabilities;
 };
 
+// The channel a registration came over: secured (Sign or SignAndEncrypt) with the URIs of
+// the registering server's certificate, or not.
+struct RegistrationChannel {
+    bool secured = false;
+    std::vector<std::string> certificateUris;
+};
+
 class LocalDiscovery {
   public:
     using Observer = std::function<void(const RegistrationEvent&)>;
@@ -125,8 +133,10 @@ class LocalDiscovery {
     void setNextRecordIdForTesting(std::uint32_t id);
 
     // ---- services (called by the Server on the network thread) ---------------------------
-    void registerServer(const RegisterServerRequest& req, RegisterServerResponse& resp);
-    void registerServer2(const RegisterServer2Request& req, RegisterServer2Response& resp);
+    void registerServer(const RegisterServerRequest& req, RegisterServerResponse& resp,
+                        const RegistrationChannel& channel = {});
+    void registerServer2(const RegisterServer2Request& req, RegisterServer2Response& resp,
+                         const RegistrationChannel& channel = {});
     // Adds the registered servers to resp.servers (which holds this server's own description
     // when it matched the filter).
     void findServers(const FindServersRequest& req, FindServersResponse& resp) const;

@@ -135,12 +135,12 @@ bool methodBelongsTo(const AddressSpace::Impl& s, NodeIndex object, NodeIndex me
 }  // namespace
 
 void AddressSpace::call(const CallRequest& request, const NodeId& sessionId,
-                        std::function<void(CallResponse)> done) {
-    call(CallRequest(request), sessionId, std::move(done));
+                        std::function<void(CallResponse)> done, const SessionIdentity* user) {
+    call(CallRequest(request), sessionId, std::move(done), user);
 }
 
 void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
-                        std::function<void(CallResponse)> done) {
+                        std::function<void(CallResponse)> done, const SessionIdentity* user) {
     if (request.methodsToCall.empty()) {
         CallResponse r;
         r.responseHeader.serviceResult = status::BadNothingToDo;
@@ -163,6 +163,7 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
     {
         std::shared_lock lock(impl_->mutex);
         const Impl& s = *impl_;
+        const bool checked = s.checksPermissions(user);
         for (std::size_t k = 0; k < n; ++k) {
             const CallMethodRequest& m = request.methodsToCall[k];
             CallMethodResult& res = state->response.results[k];
@@ -179,7 +180,11 @@ void AddressSpace::call(CallRequest&& request, const NodeId& sessionId,
                 st = status::BadMethodInvalid;
             } else if (!s.nodes[method].has(Node::kExecutable)) {
                 st = status::BadNotExecutable;
-            } else if (!s.nodes[method].has(Node::kUserExecutable)) {
+            } else if (!s.nodes[method].has(Node::kUserExecutable) ||
+                       (checked && (s.userPermissions(object, user) &
+                                    s.userPermissions(method, user) & permission::Call) == 0)) {
+                // The Call permission is needed on the method and on the object it is called
+                // on (OPC 10000-3 §8.55).
                 st = status::BadUserAccessDenied;
             } else {
                 const auto declared = s.inputArguments(method);  // keeps them alive

@@ -14,11 +14,14 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <shared_mutex>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
+#include "ua/crypto/crypto.hpp"
+#include "ua/pki/pki.hpp"
 #include "ua/server/access_control.hpp"
 #include "ua/server/address_space.hpp"
 #include "ua/server/discovery.hpp"
@@ -37,6 +40,27 @@ struct OperationLimits {
     UInt32 maxNodesPerTranslateBrowsePathsToNodeIds = 10000;
     UInt32 maxNodesPerRegisterNodes = 10000;
     UInt32 maxBrowseContinuationPoints = 16;  // per session
+};
+
+// A server's security (docs/security.md): its application instance certificate, the trust
+// list that decides which clients may open a secured channel, and the endpoints offered.
+struct ServerSecurity {
+    pki::Identity identity;
+    // Validates client certificates (untrusted ones land in its rejected/ folder). Null:
+    // every well-formed certificate is accepted — for tests only.
+    std::shared_ptr<pki::CertificateStore> trust;
+    // Offered policies, most secure first; empty: every supported one.
+    std::vector<const crypto::SecurityPolicy*> policies;
+    bool offerSign = true;  // endpoints with MessageSecurityMode Sign besides SignAndEncrypt
+    // A None endpoint for sessions. Without it a None channel serves discovery only
+    // (FindServers, GetEndpoints, FindServersOnNetwork).
+    bool offerNone = false;
+    // The name of the identity's files in the trust store's own/ (own/certs/<name>.der), where
+    // Part 12 UpdateCertificate writes a new one; empty: found by looking at every file.
+    std::string certificateName;
+    // Told about a client certificate that failed validation (on the network thread: keep it
+    // short), e.g. to tell the operator how to approve it.
+    std::function<void(const pki::Certificate&, StatusCode)> onClientRefused;
 };
 
 struct ServerConfig {
@@ -63,6 +87,8 @@ struct ServerConfig {
     Double maxSessionTimeoutMs = 3600000;
 
     std::shared_ptr<AccessControl> accessControl;  // default: anonymous only
+    // Secured endpoints; absent: SecurityPolicy None only.
+    std::optional<ServerSecurity> security;
 
     // The Local Discovery Server (docs/discovery.md); off by default.
     DiscoveryConfig discovery;
@@ -121,9 +147,17 @@ class Server : public transport::ServiceHandler {
     // so capture weak references). Any thread.
     void onSessionClosed(std::function<void(const NodeId& sessionId)> observer);
 
+    // Replaces the application instance certificate and key of a secured server (Part 12
+    // ApplyChanges). Any thread; takes effect on the network thread (at once when called on
+    // it): secure channels opened from then on, GetEndpoints and CreateSession use the new
+    // certificate; channels already open keep theirs. Throws std::logic_error without
+    // config.security.
+    void setSecurityIdentity(pki::Identity identity);
+
   private:
     struct Session;
     struct Ctx;
+    class AuthWorker;
 
     void onRequest(const std::shared_ptr<transport::ServerConnection>& conn,
                    const transport::IncomingRequest& req) override;
@@ -145,7 +179,17 @@ class Server : public transport::ServiceHandler {
     void findServersOnNetwork(Ctx&, const FindServersOnNetworkRequest&,
                               FindServersOnNetworkResponse&);
     void createSession(Ctx&, const CreateSessionRequest&, CreateSessionResponse&);
-    void activateSession(Ctx&, const ActivateSessionRequest&, ActivateSessionResponse&);
+    // ActivateSession: the channel and signature checks on the network thread; a password
+    // check (a salted hash: tens of ms) on the auth worker, answered from the network thread.
+    void activate(const std::shared_ptr<transport::ServerConnection>& conn,
+                  const transport::IncomingRequest& in);
+    // The checks before the identity token: the session is returned, or null with `resp`'s
+    // result set.
+    Session* checkActivation(Ctx&, const ActivateSessionRequest&, ActivateSessionResponse&,
+                             ActivationContext& context);
+    // After a Good token check: binds the session to the channel and the user.
+    void completeActivation(const transport::ServerConnection& conn, Session& s,
+                            const SessionIdentity& identity, ActivateSessionResponse& resp);
     void closeSession(Ctx&, const CloseSessionRequest&, CloseSessionResponse&);
     void read(Ctx&, const ReadRequest&, ReadResponse&);
     void write(Ctx&, const WriteRequest&, WriteResponse&);
@@ -175,6 +219,7 @@ class Server : public transport::ServiceHandler {
     std::unique_ptr<SubscriptionEngine> subscriptions_;
     std::unique_ptr<transport::TcpServer> transport_;
     std::unique_ptr<LocalDiscovery> discovery_;  // when config_.discovery enables it
+    std::unique_ptr<AuthWorker> authWorker_;     // started by the first password login
     DateTime startTime_;
     std::unordered_map<NodeId, std::unique_ptr<Session>> sessions_;  // by authentication token
     UInt32 nextSessionNumber_ = 1;

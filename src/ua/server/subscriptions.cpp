@@ -1766,17 +1766,31 @@ void SubscriptionEngine::fireEvent(Event event) {
     r.typeChain = m.cachedPath(true, event.eventType);
     r.event = std::move(event);
     const Impl::Paths notifiers = m.cachedPath(false, r.event.sourceNode);
+    // A session receives events from a notifier only with the ReceiveEvents permission on it
+    // (OPC 10000-3 §8.55); the rules are looked up before the engine's lock (lock order).
+    std::vector<AddressSpace::EffectivePermissions> receive;
+    if (m.as.enforcesPermissions()) {
+        receive.reserve(notifiers->size());
+        for (const NodeId& n : *notifiers) receive.push_back(m.as.effectivePermissions(n));
+    }
 
     Impl::Connections sentOn;
     {
         std::lock_guard lock(m.mutex);
         auto now = Clock::now();
         std::vector<Subscription*> touched;
-        for (const NodeId& n : *notifiers) {
+        for (std::size_t ni = 0; ni < notifiers->size(); ++ni) {
+            const NodeId& n = (*notifiers)[ni];
             auto it = m.eventWatchers.find(n);
             if (it == m.eventWatchers.end()) continue;
             for (MonitoredItem* raw : it->second) {
                 if (raw->mode == MonitoringMode::Disabled || !raw->eventFilter) continue;
+                if (!receive.empty()) {
+                    auto st = m.sessions.find(raw->subscription->session);
+                    const SessionIdentity none;
+                    const SessionIdentity& user = st == m.sessions.end() ? none : st->second.user;
+                    if ((receive[ni].of(user) & permission::ReceiveEvents) == 0) continue;
+                }
                 const CompiledEventFilter& f = *raw->eventFilter;
                 if (!matches(r, f)) continue;
                 std::vector<Variant> fields;

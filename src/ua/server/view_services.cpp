@@ -55,13 +55,19 @@ ReferenceDescription AddressSpace::Impl::describe(const Ref& r, UInt32 mask) con
 namespace {
 
 // Browses one node from reference position `start` (the lock is held).
+// Whether the session may see node i (Browse permission); always for local calls.
+bool visible(const AddressSpace::Impl& s, NodeIndex i, const SessionIdentity* user) {
+    return !s.checksPermissions(user) || (s.userPermissions(i, user) & permission::Browse) != 0;
+}
+
 BrowseResult browseFrom(const AddressSpace::Impl& s, const BrowseDescription& desc,
                         UInt32 maxReferences, std::uint32_t start, bool& wantPoint,
-                        std::uint32_t& resume) {
+                        std::uint32_t& resume, const SessionIdentity* user) {
     BrowseResult result;
     wantPoint = false;
     NodeIndex i = s.find(desc.nodeId);
-    if (i == kNoNode) {
+    // A node the session may not browse does not exist for it (reveals nothing).
+    if (i == kNoNode || !visible(s, i, user)) {
         result.statusCode = status::BadNodeIdUnknown;
         return result;
     }
@@ -78,11 +84,13 @@ BrowseResult browseFrom(const AddressSpace::Impl& s, const BrowseDescription& de
         }
     }
     const RefList& refs = s.nodes[i].refs;
+    const bool filter = s.checksPermissions(user);
     for (std::uint32_t pos = start; pos < refs.size(); ++pos) {
         const Ref& r = refs[pos];
         if (!s.referenceMatches(r, desc.browseDirection, type, desc.includeSubtypes,
                                 desc.nodeClassMask))
             continue;
+        if (filter && !r.isExternal() && !visible(s, r.target, user)) continue;
         if (maxReferences != 0 && result.references.size() == maxReferences) {
             wantPoint = true;
             resume = pos;
@@ -112,8 +120,8 @@ BrowseResult AddressSpace::browse(const BrowseDescription& description, UInt32 m
     return std::move(response.results.front());
 }
 
-BrowseResponse AddressSpace::browse(const BrowseRequest& request,
-                                    ContinuationPointStore& points) const {
+BrowseResponse AddressSpace::browse(const BrowseRequest& request, ContinuationPointStore& points,
+                                    const SessionIdentity* user) const {
     BrowseResponse response;
     if (request.nodesToBrowse.empty()) {
         response.responseHeader.serviceResult = status::BadNothingToDo;
@@ -136,7 +144,7 @@ BrowseResponse AddressSpace::browse(const BrowseRequest& request,
     for (const auto& desc : request.nodesToBrowse) {
         bool wantPoint = false;
         std::uint32_t resume = 0;
-        BrowseResult r = browseFrom(s, desc, maxRefs, 0, wantPoint, resume);
+        BrowseResult r = browseFrom(s, desc, maxRefs, 0, wantPoint, resume, user);
         if (wantPoint) {
             if (points.full()) {
                 r.references.clear();
@@ -155,7 +163,8 @@ BrowseResponse AddressSpace::browse(const BrowseRequest& request,
 }
 
 BrowseNextResponse AddressSpace::browseNext(const BrowseNextRequest& request,
-                                            ContinuationPointStore& points) const {
+                                            ContinuationPointStore& points,
+                                            const SessionIdentity* user) const {
     BrowseNextResponse response;
     if (request.continuationPoints.empty()) {
         response.responseHeader.serviceResult = status::BadNothingToDo;
@@ -177,7 +186,7 @@ BrowseNextResponse AddressSpace::browseNext(const BrowseNextRequest& request,
             bool wantPoint = false;
             std::uint32_t resume = 0;
             r = browseFrom(s, point.description, point.maxReferences, point.position, wantPoint,
-                           resume);
+                           resume, user);
             if (wantPoint) {
                 point.position = resume;
                 r.continuationPoint = points.add(std::move(point));  // a slot was just freed
@@ -197,7 +206,7 @@ BrowsePathResult AddressSpace::translateBrowsePath(const BrowsePath& path) const
 }
 
 TranslateBrowsePathsToNodeIdsResponse AddressSpace::translateBrowsePaths(
-    const TranslateBrowsePathsToNodeIdsRequest& request) const {
+    const TranslateBrowsePathsToNodeIdsRequest& request, const SessionIdentity* user) const {
     TranslateBrowsePathsToNodeIdsResponse response;
     if (request.browsePaths.empty()) {
         response.responseHeader.serviceResult = status::BadNothingToDo;
@@ -211,7 +220,7 @@ TranslateBrowsePathsToNodeIdsResponse AddressSpace::translateBrowsePaths(
         BrowsePathResult result;
         const auto& elements = path.relativePath.elements;
         NodeIndex start = s.find(path.startingNode);
-        if (start == kNoNode) {
+        if (start == kNoNode || !visible(s, start, user)) {
             result.statusCode = status::BadNodeIdUnknown;
         } else if (elements.empty()) {
             result.statusCode = status::BadNothingToDo;
@@ -240,7 +249,8 @@ TranslateBrowsePathsToNodeIdsResponse AddressSpace::translateBrowsePaths(
                             continue;
                         const Node& t = s.nodes[r.target];
                         if (t.browseNs != e.targetName.namespaceIndex ||
-                            s.strings.get(t.browseName) != e.targetName.name)
+                            s.strings.get(t.browseName) != e.targetName.name ||
+                            !visible(s, r.target, user))
                             continue;
                         if (std::find(next.begin(), next.end(), r.target) == next.end())
                             next.push_back(r.target);

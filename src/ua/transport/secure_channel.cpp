@@ -67,6 +67,19 @@ bool exceedsPeerLimits(const NegotiatedLimits& l, std::size_t body, std::size_t 
     return l.maxSendMessageSize && body + chunks * kSymmetricHeaderSize > l.maxSendMessageSize;
 }
 
+// Part 6 §6.7.6: on a secured channel a wrong sequence number (a replayed or a skipped chunk)
+// is one more failed security check for the peer, BadSecurityChecksFailed like the others;
+// BadSequenceNumberInvalid stays in the reason for our log.
+void checkSequence(SequenceValidator& validator, UInt32 sequenceNumber, bool secured) {
+    try {
+        validator.check(sequenceNumber);
+    } catch (const TransportError& e) {
+        if (!secured) throw;
+        throw TransportError(status::BadSecurityChecksFailed,
+                             "BadSequenceNumberInvalid: " + e.message());
+    }
+}
+
 }  // namespace
 
 // =======================================================================================
@@ -145,7 +158,29 @@ void ServerChannel::handleHello(const RawChunk& raw) {
 }
 
 void ServerChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
-    SecureChunk c = parseSecureChunk(raw);
+    if (raw.header.type == MessageType::OpenSecureChannel) {
+        const AsymmetricHeader h = parseAsymmetricHeader(raw);
+        if (h.policyUri != kSecurityPolicyNone) {
+            handleSecuredOpen(raw, now);
+            return;
+        }
+        if (security_) {
+            throw TransportError(status::BadSecurityPolicyRejected,
+                                 "SecurityPolicy None on a secured channel");
+        }
+    }
+    // A secured channel's MSG / CLO: the channel id is clear text, the rest is checked and
+    // decrypted before anything in it is looked at.
+    RawChunk opened = raw;
+    if (security_ && raw.header.type != MessageType::OpenSecureChannel) {
+        if (raw.size >= 12 && getUInt32(raw.data + 8) != channelId_) {
+            throw TransportError(status::BadSecureChannelIdInvalid,
+                                 "secure channel id " + std::to_string(getUInt32(raw.data + 8)) +
+                                     ", expected " + std::to_string(channelId_));
+        }
+        opened = security_->openSymmetric(raw);
+    }
+    SecureChunk c = parseSecureChunk(opened);
     if (state_ == State::AwaitOpen) {
         if (c.type != MessageType::OpenSecureChannel) {
             throw TransportError(status::BadTcpMessageTypeInvalid,
@@ -161,11 +196,7 @@ void ServerChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
             throw TransportError(status::BadSecureChannelClosed, "security token expired");
         if (c.type != MessageType::OpenSecureChannel) checkToken(c.tokenId, now);
     }
-    if (c.type == MessageType::OpenSecureChannel && c.securityPolicyUri != kSecurityPolicyNone) {
-        throw TransportError(status::BadSecurityPolicyRejected,
-                             "SecurityPolicy " + std::string(c.securityPolicyUri.substr(0, 200)));
-    }
-    receiveSequence_.check(c.sequenceNumber);
+    checkSequence(receiveSequence_, c.sequenceNumber, security_ != nullptr);
 
     auto ev = assembler_.add(c);
     if (ev.result != MessageAssembler::Result::Complete) return;  // incomplete / aborted
@@ -184,9 +215,78 @@ void ServerChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
     }
 }
 
+void ServerChannel::handleSecuredOpen(const RawChunk& raw, TimePoint now) {
+    const AsymmetricHeader h = parseAsymmetricHeader(raw);
+    const ServerSecurityConfig* sc = config_.security.get();
+    const crypto::SecurityPolicy* policy = crypto::findPolicy(h.policyUri);
+    if (sc == nullptr || policy == nullptr ||
+        std::find(sc->policies.begin(), sc->policies.end(), policy) == sc->policies.end()) {
+        throw TransportError(status::BadSecurityPolicyRejected,
+                             "SecurityPolicy " + std::string(h.policyUri.substr(0, 200)));
+    }
+    if (raw.header.chunkType != ChunkType::Final)
+        throw TransportError(status::BadSecurityChecksFailed, "OPN in several chunks");
+    const UInt32 channelId = getUInt32(raw.data + kMessageHeaderSize);
+    if (state_ == State::Open) {
+        // Renew: the same channel, policy and client certificate.
+        if (channelId != channelId_) {
+            throw TransportError(status::BadSecureChannelIdInvalid,
+                                 "secure channel id " + std::to_string(channelId));
+        }
+        if (!security_ || &security_->policy() != policy)
+            throw TransportError(status::BadSecurityPolicyRejected, "policy changed on renew");
+        const auto& der = security_->remoteCertificate().der();
+        if (h.senderCertificate.size() < der.size() ||
+            !std::equal(der.begin(), der.end(), h.senderCertificate.begin()))
+            throw TransportError(status::BadSecurityChecksFailed, "renew: another certificate");
+    } else {
+        if (crypto::ByteView(sc->identity.certificate.thumbprint()).size() !=
+                h.receiverThumbprint.size() ||
+            !crypto::constantTimeEqual(sc->identity.certificate.thumbprint(), h.receiverThumbprint))
+            throw TransportError(status::BadSecurityChecksFailed, "receiver thumbprint");
+        std::vector<pki::Certificate> chain;
+        try {
+            chain = pki::Certificate::chainFromDer(h.senderCertificate);
+        } catch (const std::exception& e) {
+            throw TransportError(status::BadSecurityChecksFailed,
+                                 std::string("sender certificate: ") + e.what());
+        }
+        if (chain.empty())
+            throw TransportError(status::BadSecurityChecksFailed, "no sender certificate");
+        if (sc->validateClient) {
+            const StatusCode st = sc->validateClient(chain);
+            if (st.isBad()) {
+                throw TransportError(status::BadSecurityChecksFailed,
+                                     "client certificate: " + std::string(st.name()));
+            }
+        }
+        security_ = std::make_unique<ChannelSecurity>(*policy, MessageSecurityMode::Invalid,
+                                                      sc->identity, chain.front());
+    }
+    const Buffer plain = security_->openOpen(raw, h);
+    if (plain.size() < 8) throw TransportError(status::BadSecurityChecksFailed, "OPN: too short");
+    SecureChunk c;
+    c.type = MessageType::OpenSecureChannel;
+    c.chunkType = ChunkType::Final;
+    c.channelId = channelId;
+    c.securityPolicyUri = h.policyUri;
+    c.sequenceNumber = getUInt32(plain.data());
+    c.requestId = getUInt32(plain.data() + 4);
+    c.body = plain.data() + 8;
+    c.bodySize = plain.size() - 8;
+    checkSequence(receiveSequence_, c.sequenceNumber, true);
+    auto ev = assembler_.add(c);
+    if (ev.result == MessageAssembler::Result::Complete)
+        handleOpen(ev.requestId, ev.body, ev.size, now);
+}
+
 void ServerChannel::checkToken(UInt32 tokenId, TimePoint now) {
     if (tokenId == current_.tokenId) {
         // The client uses the newest token: the previous one is done with.
+        if (previous_ && security_) {
+            security_->sendWith(current_.tokenId);
+            security_->dropPrevious();
+        }
         previous_.reset();
         sendTokenId_ = current_.tokenId;
         return;
@@ -200,6 +300,10 @@ void ServerChannel::dropExpiredPrevious(TimePoint now) {
     if (previous_ && !previous_->usable(now)) {
         previous_.reset();
         sendTokenId_ = current_.tokenId;
+        if (security_) {
+            security_->sendWith(current_.tokenId);
+            security_->dropPrevious();
+        }
     }
 }
 
@@ -224,9 +328,26 @@ void ServerChannel::handleOpen(UInt32 requestId, const Byte* body, std::size_t s
                                                                 ? "Issue on an open secure channel"
                                                                 : "Renew before Issue");
     }
-    if (req.securityMode != MessageSecurityMode::None) {
+    if (!security_ && req.securityMode != MessageSecurityMode::None) {
         throw TransportError(status::BadSecurityModeRejected,
-                             "only MessageSecurityMode None is supported");
+                             "MessageSecurityMode " + std::string(toString(req.securityMode)) +
+                                 " with SecurityPolicy None");
+    }
+    ByteString serverNonce;
+    if (security_) {
+        const bool modeOk = req.securityMode == MessageSecurityMode::Sign ||
+                            req.securityMode == MessageSecurityMode::SignAndEncrypt;
+        if (!modeOk || (renew && req.securityMode != security_->mode())) {
+            throw TransportError(status::BadSecurityModeRejected,
+                                 "MessageSecurityMode " + std::string(toString(req.securityMode)));
+        }
+        if (req.clientNonce.size() != security_->policy().nonceLength)
+            throw TransportError(status::BadNonceInvalid, "client nonce length");
+        security_->setMode(req.securityMode);
+        {
+            const auto nonce = crypto::randomBytes(security_->policy().nonceLength);
+            serverNonce = ByteString(nonce.data(), nonce.size());
+        }
     }
 
     // Clamped to [min, max]; max wins if a configuration has them the wrong way round.
@@ -246,6 +367,12 @@ void ServerChannel::handleOpen(UInt32 requestId, const Byte* body, std::size_t s
         state_ = State::Open;
     }
     current_ = token;
+    if (security_) {
+        security_->installToken(token.tokenId,
+                                crypto::ByteView(req.clientNonce.data(), req.clientNonce.size()),
+                                crypto::ByteView(serverNonce.data(), serverNonce.size()), true);
+        if (!renew) security_->sendWith(token.tokenId);
+    }
 
     OpenSecureChannelResponse resp;
     resp.responseHeader.timestamp = DateTime::now();
@@ -255,13 +382,33 @@ void ServerChannel::handleOpen(UInt32 requestId, const Byte* body, std::size_t s
     resp.securityToken.tokenId = token.tokenId;
     resp.securityToken.createdAt = resp.responseHeader.timestamp;
     resp.securityToken.revisedLifetime = static_cast<UInt32>(lifetime.count());
+    resp.serverNonce = std::move(serverNonce);
     Buffer out;
     out.reserve(128);
     BinaryEncoder e(out);
     encode(e, encodingId<OpenSecureChannelResponse>());
     encode(e, resp);
+    if (security_) {
+        hooks_.write(security_->sealOpen(channelId_, sendSequence_.next(), requestId,
+                                         crypto::ByteView(out.data(), out.size())));
+        return;
+    }
     hooks_.write(
         makeOpenChunk(channelId_, sendSequence_.next(), requestId, out.data(), out.size()));
+}
+
+std::string_view ServerChannel::securityPolicyUri() const {
+    return security_ ? security_->policy().uri : kSecurityPolicyNone;
+}
+
+MessageSecurityMode ServerChannel::securityMode() const {
+    return security_ ? security_->mode() : MessageSecurityMode::None;
+}
+
+std::size_t ServerChannel::chunksFor(std::size_t body) const {
+    if (!security_) return chunkCount(body, limits_.sendBufferSize);
+    const std::size_t maxBody = security_->maxBodyPerChunk(limits_.sendBufferSize);
+    return body == 0 ? 1 : (body + maxBody - 1) / maxBody;
 }
 
 void ServerChannel::handleMessage(UInt32 requestId, const Byte* body, std::size_t size,
@@ -292,7 +439,7 @@ bool ServerChannel::sendMessage(UInt32 requestId, Buffer&& message, bool isFault
     if (message.size() < kSymmetricHeaderSize) return false;
     if (previous_) dropExpiredPrevious(Clock::now());
     const std::size_t body = message.size() + splicedSize(splices) - kSymmetricHeaderSize;
-    const std::size_t chunks = chunkCount(body, limits_.sendBufferSize);
+    const std::size_t chunks = chunksFor(body);
     if (exceedsPeerLimits(limits_, body, chunks)) {
         // Limits so small that not even a ServiceFault fits (found by the fuzzer): the
         // client cannot be answered, so the channel ends with an ERR.
@@ -303,6 +450,14 @@ bool ServerChannel::sendMessage(UInt32 requestId, Buffer&& message, bool isFault
         }
         return sendServiceFault(requestId, responseRequestHandle(message),
                                 status::BadResponseTooLarge);
+    }
+    if (security_) {
+        // Signed (and encrypted) as a whole: spliced byte runs are joined first.
+        if (!splices.empty()) message = joinSplices(std::move(message), splices);
+        security_->sealSymmetric(message, MessageType::Message, channelId_, requestId,
+                                 sendSequence_, limits_.sendBufferSize);
+        hooks_.write(std::move(message));
+        return true;
     }
     Splices left =
         writeSymmetricChunks(message, std::move(splices), MessageType::Message, channelId_,
@@ -357,7 +512,10 @@ void ServerChannel::fail(StatusCode status, const std::string& reason) {
     state_ = State::Closed;
     closeStatus_ = status;
     closeReason_ = reason;
-    hooks_.write(encodeMessage(ErrorMessage{status, reason}));
+    // A failed security check tells the peer nothing about which one failed (a signature,
+    // the padding, a certificate): the detail stays in closeReason() for our log.
+    hooks_.write(encodeMessage(ErrorMessage{
+        status, status == status::BadSecurityChecksFailed ? "security checks failed" : reason}));
 }
 
 // =======================================================================================
@@ -367,7 +525,15 @@ ClientChannel::ClientChannel(const ClientConfig& config, std::string endpointUrl
     : config_(config),
       endpointUrl_(std::move(endpointUrl)),
       hooks_(hooks),
-      reader_(readCapacity(config), std::max(config.receiveBufferSize, kMinBufferSize)) {}
+      reader_(readCapacity(config), std::max(config.receiveBufferSize, kMinBufferSize)) {
+    if (const ClientSecurityConfig* sc = config_.security.get(); sc && sc->policy) {
+        if (sc->mode != MessageSecurityMode::Sign &&
+            sc->mode != MessageSecurityMode::SignAndEncrypt)
+            throw std::invalid_argument("a secured channel's mode is Sign or SignAndEncrypt");
+        security_ = std::make_unique<ChannelSecurity>(*sc->policy, sc->mode, sc->identity,
+                                                      sc->serverCertificate);
+    }
+}
 
 void ClientChannel::start(TimePoint /*now*/) {
     hello_ = makeHello(config_, endpointUrl_);
@@ -456,10 +622,39 @@ void ClientChannel::checkToken(UInt32 tokenId, TimePoint now) {
 }
 
 void ClientChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
-    SecureChunk c = parseSecureChunk(raw);
-    if (c.type == MessageType::OpenSecureChannel) {
-        if (c.securityPolicyUri != kSecurityPolicyNone)
-            throw TransportError(status::BadSecurityPolicyRejected, "OPN response policy");
+    SecureChunk c;
+    Buffer plain;  // a secured OPN's decrypted sequence header and body
+    if (raw.header.type == MessageType::OpenSecureChannel) {
+        const AsymmetricHeader h = parseAsymmetricHeader(raw);
+        if (!security_) {
+            c = parseSecureChunk(raw);
+            if (c.securityPolicyUri != kSecurityPolicyNone)
+                throw TransportError(status::BadSecurityPolicyRejected, "OPN response policy");
+        } else {
+            // The server answers with our policy, to our certificate, from its own.
+            if (h.policyUri != security_->policy().uri)
+                throw TransportError(status::BadSecurityPolicyRejected, "OPN response policy");
+            if (raw.header.chunkType != ChunkType::Final)
+                throw TransportError(status::BadSecurityChecksFailed, "OPN in several chunks");
+            const auto ownThumbprint = config_.security->identity.certificate.thumbprint();
+            const auto& serverDer = security_->remoteCertificate().der();
+            if (h.receiverThumbprint.size() != ownThumbprint.size() ||
+                !crypto::constantTimeEqual(h.receiverThumbprint, ownThumbprint) ||
+                h.senderCertificate.size() < serverDer.size() ||
+                !std::equal(serverDer.begin(), serverDer.end(), h.senderCertificate.begin()))
+                throw TransportError(status::BadSecurityChecksFailed, "OPN response certificates");
+            plain = security_->openOpen(raw, h);
+            if (plain.size() < 8)
+                throw TransportError(status::BadSecurityChecksFailed, "OPN: too short");
+            c.type = MessageType::OpenSecureChannel;
+            c.chunkType = ChunkType::Final;
+            c.channelId = getUInt32(raw.data + kMessageHeaderSize);
+            c.securityPolicyUri = h.policyUri;
+            c.sequenceNumber = getUInt32(plain.data());
+            c.requestId = getUInt32(plain.data() + 4);
+            c.body = plain.data() + 8;
+            c.bodySize = plain.size() - 8;
+        }
         if (state_ == State::Open && c.channelId != channelId_) {
             throw TransportError(status::BadSecureChannelIdInvalid,
                                  "secure channel id " + std::to_string(c.channelId));
@@ -467,10 +662,11 @@ void ClientChannel::handleSecureChunk(const RawChunk& raw, TimePoint now) {
     } else {
         if (state_ != State::Open)
             throw TransportError(status::BadTcpMessageTypeInvalid, "MSG before OPN response");
-        if (c.channelId != channelId_) {
+        if (raw.size >= 12 && getUInt32(raw.data + 8) != channelId_) {
             throw TransportError(status::BadSecureChannelIdInvalid,
-                                 "secure channel id " + std::to_string(c.channelId));
+                                 "secure channel id " + std::to_string(getUInt32(raw.data + 8)));
         }
+        c = parseSecureChunk(security_ ? security_->openSymmetric(raw) : raw);
         checkToken(c.tokenId, now);
     }
     receiveSequence_.check(c.sequenceNumber);
@@ -551,6 +747,13 @@ void ClientChannel::handleOpenResponse(UInt32 requestId, const Byte* body, std::
     t.created = now;
     t.lifetime = std::chrono::milliseconds(tok.revisedLifetime ? tok.revisedLifetime
                                                                : config_.requestedLifetime.count());
+    if (security_) {
+        if (resp.serverNonce.size() != security_->policy().nonceLength)
+            throw TransportError(status::BadNonceInvalid, "server nonce length");
+        security_->installToken(tok.tokenId, clientNonce_,
+                                crypto::ByteView(resp.serverNonce.data(), resp.serverNonce.size()),
+                                false);
+    }
     if (renew) {
         previous_ = current_;
         renewRequestId_ = 0;
@@ -560,6 +763,12 @@ void ClientChannel::handleOpenResponse(UInt32 requestId, const Byte* body, std::
         state_ = State::Open;
     }
     current_ = t;
+}
+
+std::size_t ClientChannel::chunksFor(std::size_t body) const {
+    if (!security_) return chunkCount(body, limits_.sendBufferSize);
+    const std::size_t maxBody = security_->maxBodyPerChunk(limits_.sendBufferSize);
+    return body == 0 ? 1 : (body + maxBody - 1) / maxBody;
 }
 
 UInt32 ClientChannel::nextRequestId() {
@@ -574,7 +783,11 @@ void ClientChannel::writeOpenRequest(bool renew, TimePoint /*now*/) {
     req.requestHeader.requestHandle = id;
     req.clientProtocolVersion = hello_.protocolVersion;
     req.requestType = renew ? SecurityTokenRequestType::Renew : SecurityTokenRequestType::Issue;
-    req.securityMode = MessageSecurityMode::None;
+    req.securityMode = security_ ? security_->mode() : MessageSecurityMode::None;
+    if (security_) {
+        clientNonce_ = crypto::randomBytes(security_->policy().nonceLength);
+        req.clientNonce = ByteString(clientNonce_.data(), clientNonce_.size());
+    }
     auto lifetime = std::clamp<std::chrono::milliseconds::rep>(config_.requestedLifetime.count(), 0,
                                                                0xFFFFFFFF);
     req.requestedLifetime = static_cast<UInt32>(lifetime);
@@ -583,8 +796,10 @@ void ClientChannel::writeOpenRequest(bool renew, TimePoint /*now*/) {
     BinaryEncoder e(body);
     encode(e, encodingId<OpenSecureChannelRequest>());
     encode(e, req);
-    Buffer chunk =
-        makeOpenChunk(renew ? channelId_ : 0, sendSequence_.next(), id, body.data(), body.size());
+    Buffer chunk = security_ ? security_->sealOpen(renew ? channelId_ : 0, sendSequence_.next(), id,
+                                                   crypto::ByteView(body.data(), body.size()))
+                             : makeOpenChunk(renew ? channelId_ : 0, sendSequence_.next(), id,
+                                             body.data(), body.size());
     if (renew)
         renewRequestId_ = id;
     else
@@ -600,7 +815,7 @@ UInt32 ClientChannel::send(Buffer&& message, Splices&& splices) {
     if (message.size() < kSymmetricHeaderSize)
         throw std::invalid_argument("message buffer without the reserved header bytes");
     const std::size_t body = message.size() + splicedSize(splices) - kSymmetricHeaderSize;
-    const std::size_t chunks = chunkCount(body, limits_.sendBufferSize);
+    const std::size_t chunks = chunksFor(body);
     if (exceedsPeerLimits(limits_, body, chunks)) {
         throw TransportError(status::BadRequestTooLarge,
                              "request of " + std::to_string(body) + " bytes in " +
@@ -609,6 +824,13 @@ UInt32 ClientChannel::send(Buffer&& message, Splices&& splices) {
                                  std::to_string(limits_.maxSendChunkCount) + " chunks");
     }
     const UInt32 id = nextRequestId();
+    if (security_) {
+        if (!splices.empty()) message = joinSplices(std::move(message), splices);
+        security_->sealSymmetric(message, MessageType::Message, channelId_, id, sendSequence_,
+                                 limits_.sendBufferSize);
+        hooks_.write(std::move(message));
+        return id;
+    }
     Splices left =
         writeSymmetricChunks(message, std::move(splices), MessageType::Message, channelId_,
                              current_.tokenId, id, sendSequence_, limits_.sendBufferSize);
@@ -639,8 +861,12 @@ void ClientChannel::close() {
         req.requestHeader.timestamp = DateTime::now();
         encode(e, encodingId<CloseSecureChannelRequest>());
         encode(e, req);
-        writeSymmetricChunks(b, MessageType::CloseSecureChannel, channelId_, current_.tokenId,
-                             nextRequestId(), sendSequence_, limits_.sendBufferSize);
+        if (security_)
+            security_->sealSymmetric(b, MessageType::CloseSecureChannel, channelId_,
+                                     nextRequestId(), sendSequence_, limits_.sendBufferSize);
+        else
+            writeSymmetricChunks(b, MessageType::CloseSecureChannel, channelId_, current_.tokenId,
+                                 nextRequestId(), sendSequence_, limits_.sendBufferSize);
         hooks_.write(std::move(b));
     }
     state_ = State::Closed;

@@ -3,8 +3,9 @@
 // side). TcpServer and ClientConnection feed them the bytes read from their sockets and
 // write what they produce; tests connect the two in memory.
 //
-// SecurityPolicy None only (OPC 10000-6 §6.7.2.3: asymmetric header with empty certificate
-// and thumbprint, MessageSecurityMode None).
+// SecurityPolicy None (OPC 10000-6 §6.7.2.3: asymmetric header with empty certificate and
+// thumbprint) and the RSA policies with Sign / SignAndEncrypt (ChannelSecurity, when the
+// configuration has a ServerSecurityConfig / ClientSecurityConfig).
 #pragma once
 
 #include <algorithm>
@@ -16,6 +17,7 @@
 #include <string>
 #include <utility>
 
+#include "ua/transport/channel_security.hpp"
 #include "ua/transport/chunks.hpp"
 
 namespace pnp::ua::transport {
@@ -134,6 +136,8 @@ struct ServerTransportConfig : TransportLimits {
     // The revised token lifetime is the requested one clamped to [min, max].
     std::chrono::milliseconds minTokenLifetime{10'000};
     std::chrono::milliseconds maxTokenLifetime{3'600'000};
+    // Secured channels (certificate, policies, trust); null: SecurityPolicy None only.
+    std::shared_ptr<const ServerSecurityConfig> security;
 };
 
 // Transport settings of a client. The limits (TransportLimits) are announced in the Hello
@@ -143,6 +147,8 @@ struct ClientConfig : TransportLimits {
     std::chrono::milliseconds requestedLifetime{600'000};
     // Deadline of ClientConnection::send() when none is given (a server that stops reading).
     std::chrono::milliseconds sendTimeout{10'000};
+    // A secured channel (policy, mode, certificates); null: SecurityPolicy None.
+    std::shared_ptr<const ClientSecurityConfig> security;
 };
 
 // A SecurityToken as both sides track it. Usable until created + lifetime * 1.25: the 25 %
@@ -224,6 +230,10 @@ class ServerChannel {
     const std::string& endpointUrl() const { return endpointUrl_; }
     const NegotiatedLimits& limits() const { return limits_; }
     UInt32 currentTokenId() const { return current_.tokenId; }
+    // The channel's security: null for SecurityPolicy None.
+    const ChannelSecurity* security() const { return security_.get(); }
+    std::string_view securityPolicyUri() const;
+    MessageSecurityMode securityMode() const;
 
   private:
     // send(); `isFault`: the message is the ServiceFault replacing a response too large.
@@ -232,7 +242,11 @@ class ServerChannel {
     void handleChunk(const RawChunk& raw, TimePoint now);
     void handleHello(const RawChunk& raw);
     void handleSecureChunk(const RawChunk& raw, TimePoint now);
+    // A secured OPN chunk: checks policy, receiver and sender, decrypts and verifies; then
+    // the request is handled as any OPN.
+    void handleSecuredOpen(const RawChunk& raw, TimePoint now);
     void handleOpen(UInt32 requestId, const Byte* body, std::size_t size, TimePoint now);
+    std::size_t chunksFor(std::size_t body) const;
     void handleMessage(UInt32 requestId, const Byte* body, std::size_t size, ByteBlock* block);
     void checkToken(UInt32 tokenId, TimePoint now);
     void dropExpiredPrevious(TimePoint now);
@@ -256,6 +270,7 @@ class ServerChannel {
     TokenState current_;
     std::optional<TokenState> previous_;  // after a renew, until the client uses the new one
     UInt32 sendTokenId_ = 0;              // the token our messages carry
+    std::unique_ptr<ChannelSecurity> security_;
 };
 
 // ---------------------------------------------------------------------------------------
@@ -315,11 +330,13 @@ class ClientChannel {
     UInt32 currentTokenId() const { return current_.tokenId; }
     std::chrono::milliseconds revisedLifetime() const { return current_.lifetime; }
     const NegotiatedLimits& limits() const { return limits_; }
+    const ChannelSecurity* security() const { return security_.get(); }
 
   private:
     void handleChunk(const RawChunk& raw, TimePoint now);
     void handleSecureChunk(const RawChunk& raw, TimePoint now);
     void handleOpenResponse(UInt32 requestId, const Byte* body, std::size_t size, TimePoint now);
+    std::size_t chunksFor(std::size_t body) const;
     void writeOpenRequest(bool renew, TimePoint now);
     void checkToken(UInt32 tokenId, TimePoint now);
     UInt32 nextRequestId();
@@ -341,6 +358,8 @@ class ClientChannel {
     UInt32 openRequestId_ = 0;   // outstanding Issue request
     UInt32 renewRequestId_ = 0;  // outstanding Renew request
     bool viewBodies_ = false;
+    std::unique_ptr<ChannelSecurity> security_;
+    crypto::Bytes clientNonce_;  // of the outstanding OpenSecureChannel request
 };
 
 }  // namespace pnp::ua::transport

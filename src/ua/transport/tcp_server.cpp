@@ -187,6 +187,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     // ---- ServerConnection -------------------------------------------------------------
     UInt32 channelId() const override { return channelId_.load(std::memory_order_acquire); }
     const std::string& endpointUrl() const override { return channel_.endpointUrl(); }
+    const ChannelSecurity* security() const override { return channel_.security(); }
     std::string peerAddress() const override { return peer_; }
     bool isClosed() const override { return closedFlag_.load(std::memory_order_acquire); }
     void flush() override { (void)writeQueued(); }
@@ -570,9 +571,15 @@ void NetworkLock::unlock() {
     lock_.unlock();
     for (auto& c : t_dirty) c->afterNetworkLock();
     t_dirty.clear();
-    // By index: a function may queue another one (without the lock now: that one runs at once).
-    for (std::size_t i = 0; i < t_afterWrite.size(); ++i) runDropping(t_afterWrite[i]);
-    t_afterWrite.clear();
+    // Taken out first: a function that takes the network lock itself (sending a response
+    // does) runs this again, which must not run the earlier functions a second time. The
+    // buffer goes back afterwards: no allocation per request.
+    if (t_afterWrite.empty()) return;
+    std::vector<std::function<void()>> run;
+    run.swap(t_afterWrite);
+    for (auto& fn : run) runDropping(fn);
+    run.clear();
+    if (t_afterWrite.empty()) t_afterWrite.swap(run);
 }
 
 // =======================================================================================

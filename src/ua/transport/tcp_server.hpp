@@ -65,6 +65,9 @@ class ServerConnection : public std::enable_shared_from_this<ServerConnection> {
     virtual const std::string& endpointUrl() const = 0;
     // "127.0.0.1:53412", "[::1]:53412".
     virtual std::string peerAddress() const = 0;
+    // The secure channel's policy, mode and client certificate; null for SecurityPolicy None.
+    // Set before the first onRequest and constant afterwards (a renew keeps them).
+    virtual const ChannelSecurity* security() const { return nullptr; }
 
     // A buffer for a response: kSymmetricHeaderSize bytes reserved for the headers; append
     // the response's encoding NodeId and body with a BinaryEncoder, then send() it.

@@ -298,6 +298,23 @@ TEST_F(ClientFake, DiscoveryWithoutSession) {
     EXPECT_EQ(c.getEndpoints(server.url()).size(), 1u);
 }
 
+// A registrar renews every few hundred ms: with keepDiscoveryConnection its requests share one
+// channel, and a channel the server closed meanwhile is replaced without an error.
+TEST_F(ClientFake, KeptDiscoveryConnectionIsReusedAndReplacedWhenClosed) {
+    ClientConfig config;
+    config.keepDiscoveryConnection = true;
+    Client c(config);
+    for (int i = 0; i < 5; ++i) ASSERT_EQ(c.getEndpoints(server.url()).size(), 1u);
+    EXPECT_EQ(server.connectionsSeen(), 1u);
+    server.dropConnections();
+    for (int i = 0; i < 3; ++i) ASSERT_EQ(c.findServers(server.url()).size(), 1u);
+    EXPECT_EQ(server.connectionsSeen(), 2u);
+    // Without it: one connection per request.
+    Client once;
+    for (int i = 0; i < 3; ++i) ASSERT_EQ(once.getEndpoints(server.url()).size(), 1u);
+    EXPECT_EQ(server.connectionsSeen(), 5u);
+}
+
 TEST_F(ClientFake, DestructorAndDisconnectCloseTheSession) {
     {
         Client c;

@@ -115,6 +115,12 @@ class FakeServer : public transport::ServiceHandler {
         browseRefs_ = n;
     }
 
+    // Connections that sent a request so far (closed ones included).
+    std::size_t connectionsSeen() {
+        std::lock_guard lock(mutex_);
+        return connectionsSeen_;
+    }
+
     // Counters by request encoding id.
     std::size_t count(UInt32 typeId) {
         std::lock_guard lock(mutex_);
@@ -182,8 +188,10 @@ class FakeServer : public transport::ServiceHandler {
             std::lock_guard lock(mutex_);
             ++counts_[r.typeId];
             received_.push_back(r);
-            if (std::find(connections_.begin(), connections_.end(), conn) == connections_.end())
+            if (std::find(connections_.begin(), connections_.end(), conn) == connections_.end()) {
                 connections_.push_back(conn);
+                ++connectionsSeen_;
+            }
             hook = hook_;
         }
         if (hook && hook(r)) return;
@@ -217,6 +225,7 @@ class FakeServer : public transport::ServiceHandler {
     std::vector<NodeId> activatedTokens_;
     std::vector<Request> received_;
     std::vector<std::shared_ptr<transport::ServerConnection>> connections_;
+    std::size_t connectionsSeen_ = 0;
     std::vector<std::thread> threads_;
     std::size_t browseRefs_ = 5;
 };
