@@ -28,6 +28,9 @@ using skill::client::GenericSkillClient;
 using skill::detector::DetectedSkill;
 
 constexpr std::string_view kWorldUri = "urn:pnp:sim:world";
+constexpr std::string_view kRoboticsUri = "http://opcfoundation.org/UA/Robotics/";
+constexpr std::string_view kDiUri = "http://opcfoundation.org/UA/DI/";
+constexpr std::size_t kMaxAxes = 12;                  // axes of one motion device we show
 constexpr std::size_t kMaxRecordBytes = 1024 * 1024;  // an MES Record we parse
 constexpr std::size_t kMaxJobs = 100000;              // queued monitoring jobs
 constexpr std::size_t kMaxWorldItems = 3000;          // robots, objects, tools watched
@@ -99,7 +102,13 @@ json stepsJson(const json& steps) {
 
 json textOrNull(const ua::Variant& v) {
     if (const auto* s = v.scalar<ua::String>(); s && !s->empty()) return *s;
+    if (const auto* t = v.scalar<ua::LocalizedText>(); t && !t->text.empty()) return t->text;
     return nullptr;
+}
+
+// Axis1 < Axis2 < Axis10: the axes' order is in their names' numbers.
+bool naturalLess(const std::string& a, const std::string& b) {
+    return a.size() != b.size() ? a.size() < b.size() : a < b;
 }
 
 bool isEnd(skill::ProgramState from, skill::ProgramState to) {
@@ -175,6 +184,13 @@ struct CellView::Impl {
             ua::client::MonitoredItem item;
         };
         std::map<std::string, ProgressWatch> progress;  // by skill id
+        // A motion device's Robotics nodes, when there is no ground truth (real hardware).
+        struct RobotWatch {
+            std::string name;  // the key of the world's robot maps
+            ua::client::Subscription subscription;
+            std::vector<ua::client::MonitoredItem> items;
+        };
+        std::map<std::string, RobotWatch> robots;  // by component id
     };
     std::map<std::string, Link> links;
     std::shared_ptr<ua::client::Client> worldClient;
@@ -309,11 +325,12 @@ struct CellView::Impl {
 
     void onSkill(const DetectedSkill& d, bool added) {
         const std::string id = skillId(d);
+        const std::string comp = componentId(d);
         std::vector<std::string> messages;
+        bool newComponent = false, componentGone = false;
         {
             std::lock_guard lock(mutex);
             if (stopping) return;
-            const std::string comp = componentId(d);
             if (added) {
                 if (skills.count(id) || skills.size() >= options.maxSkills) return;
                 SkillEntry e;
@@ -321,6 +338,7 @@ struct CellView::Impl {
                 e.component = comp;
                 e.isProcess = d.isA(skill::types::ExecuteProcessSkillType);
                 if (componentSkills[comp]++ == 0) {
+                    newComponent = true;
                     components[comp] = {{"id", comp},
                                         {"name", d.controllerName},
                                         {"endpoint", d.endpointUrl},
@@ -329,6 +347,17 @@ struct CellView::Impl {
                     messages.push_back(
                         json{{"type", "component"}, {"op", "add"}, {"component", components[comp]}}
                             .dump());
+                }
+                // A server given by --url is known by its URL alone until its skills say
+                // which application it is.
+                if (auto s = servers.find(d.endpointUrl);
+                    s != servers.end() && s->second.info.value("applicationUri", "").empty() &&
+                    !d.componentUri.empty()) {
+                    s->second.info["applicationUri"] = d.componentUri;
+                    if (s->second.info.value("name", "").empty())
+                        s->second.info["name"] = d.componentName;
+                    messages.push_back(
+                        json{{"type", "server"}, {"op", "add"}, {"server", s->second.info}}.dump());
                 }
                 if (auto s = servers.find(d.endpointUrl);
                     s != servers.end() && !s->second.detectionRecorded) {
@@ -347,6 +376,7 @@ struct CellView::Impl {
                 messages.push_back(
                     json{{"type", "skill"}, {"op", "remove"}, {"skill", {{"id", id}}}}.dump());
                 if (--componentSkills[comp] == 0) {
+                    componentGone = true;
                     componentSkills.erase(comp);
                     components.erase(comp);
                     messages.push_back(
@@ -360,6 +390,11 @@ struct CellView::Impl {
             queue([this, id] { attach(id); });
         else
             queue([this, id, url = d.endpointUrl] { detach(id, url); });
+        // Without a ground truth the 3D view follows the robots' own Robotics nodes.
+        if (options.worldUrl.empty() && newComponent)
+            queue([this, comp, d] { watchRobot(comp, d); });
+        if (options.worldUrl.empty() && componentGone)
+            queue([this, comp, url = d.endpointUrl] { unwatchRobot(comp, url); });
     }
 
     // Monitoring thread: a SkillClient on the server's monitoring session.
@@ -433,8 +468,114 @@ struct CellView::Impl {
         link->second.skills.erase(id);
         if (link->second.skills.empty()) {
             link->second.client->disconnect();
+            std::vector<std::string> names;
+            for (const auto& [comp, r] : link->second.robots) names.push_back(r.name);
             links.erase(link);
+            for (const auto& n : names) forgetRobot(n);
         }
+    }
+
+    // Monitoring thread: a component that is a motion device (OPC 40010: an Axes folder
+    // whose axes have ParameterSet/ActualPosition) becomes a robot of the world: its joints
+    // from ActualPosition, its model from the DI Model, its base from WorldToRobotBase.
+    void watchRobot(const std::string& comp, const DetectedSkill& d) {
+        const auto link = links.find(d.endpointUrl);
+        if (link == links.end() || !link->second.client || link->second.robots.count(comp)) return;
+        auto& client = *link->second.client;
+        std::string inserted;  // the world's entry, once made
+        try {
+            const ua::UInt16 rob = client.namespaceIndex(kRoboticsUri, options.requestTimeout);
+            const ua::UInt16 di = client.namespaceIndex(kDiUri, options.requestTimeout);
+            ua::NodeId axesFolder, model, base;
+            for (const auto& r : client.browse(d.controller, {}, options.requestTimeout)) {
+                const auto& n = r.browseName;
+                if (n.namespaceIndex == rob && n.name == "Axes") axesFolder = r.nodeId.nodeId;
+                if (n.namespaceIndex == di && n.name == "Model") model = r.nodeId.nodeId;
+                if (n.name == "WorldToRobotBase") base = r.nodeId.nodeId;
+            }
+            if (axesFolder.isNull()) return;  // not a motion device
+            std::vector<std::pair<std::string, ua::NodeId>> axes;
+            for (const auto& r : client.browse(axesFolder, {}, options.requestTimeout))
+                if (axes.size() < kMaxAxes) axes.emplace_back(r.browseName.name, r.nodeId.nodeId);
+            std::sort(axes.begin(), axes.end(),
+                      [](const auto& a, const auto& b) { return naturalLess(a.first, b.first); });
+            const std::string path = "/" + std::to_string(di) + ":ParameterSet/" +
+                                     std::to_string(rob) + ":ActualPosition";
+            std::vector<ua::NodeId> positions;
+            for (const auto& [name, axis] : axes)
+                positions.push_back(client.resolve(axis, path, options.requestTimeout));
+            if (positions.empty()) return;
+
+            Link::RobotWatch w;
+            {
+                std::lock_guard lock(worldMutex);
+                w.name = d.controllerName.empty() ? comp : d.controllerName;
+                if (world.joints.count(w.name)) w.name += " (" + d.endpointUrl + ")";
+                world.joints[w.name] = json(std::vector<double>(positions.size(), 0.0));
+                world.tool[w.name] = nullptr;
+                world.model[w.name] = nullptr;
+                inserted = w.name;
+            }
+            const std::string name = w.name;
+            w.subscription = ua::client::Subscription(
+                client, {.publishingInterval = 1000.0 / std::max(1.0, options.worldRate)}, {},
+                options.requestTimeout);
+            std::vector<ua::NodeId> nodes = positions;
+            if (!model.isNull()) nodes.push_back(model);
+            if (!base.isNull()) nodes.push_back(base);
+            const std::size_t axisCount = positions.size();
+            const bool hasModel = !model.isNull();
+            w.items = w.subscription.monitorValues(
+                nodes,
+                [this, name, axisCount, hasModel](std::size_t i, const ua::DataValue& v) {
+                    if (!v.value) return;
+                    {
+                        std::lock_guard lock(worldMutex);
+                        auto joints = world.joints.find(name);
+                        if (joints == world.joints.end()) return;  // forgotten meanwhile
+                        if (i < axisCount) {
+                            const auto* q = v.value->scalar<ua::Double>();
+                            if (!q) return;
+                            joints->second[i] = *q;
+                        } else if (i == axisCount && hasModel) {
+                            world.model[name] = textOrNull(*v.value);
+                        } else {
+                            world.base[name] = frameJson(*v.value);
+                        }
+                        world.time = v.sourceTimestamp ? epochMs(*v.sourceTimestamp) : nowMs();
+                        world.any = true;
+                        worldDirty = true;
+                    }
+                    worldWake.notify_one();
+                },
+                {.samplingInterval = 0}, nullptr, options.requestTimeout);
+            link->second.robots[comp] = std::move(w);
+        } catch (const std::exception&) {
+            // not a motion device we can follow: the 3D view shows no robot for it
+            if (!inserted.empty()) forgetRobot(inserted);
+        }
+    }
+
+    void unwatchRobot(const std::string& comp, const std::string& url) {
+        const auto link = links.find(url);
+        if (link == links.end()) return;
+        const auto it = link->second.robots.find(comp);
+        if (it == link->second.robots.end()) return;
+        const std::string name = it->second.name;
+        link->second.robots.erase(it);
+        forgetRobot(name);
+    }
+
+    void forgetRobot(const std::string& name) {
+        {
+            std::lock_guard lock(worldMutex);
+            world.joints.erase(name);
+            world.tool.erase(name);
+            world.model.erase(name);
+            world.base.erase(name);
+            worldDirty = true;
+        }
+        worldWake.notify_one();
     }
 
     static json resultJson(const skill::client::FinalResult& r) {
@@ -489,12 +630,19 @@ struct CellView::Impl {
             pushBounded(timeline, m, options.timelineLength);
             messages.push_back(m.dump());
             if (ended) messages.push_back(statsJson().dump());
+            const bool processShown =
+                process.is_object() && process["skill"] == id &&
+                (process["state"] == "Running" || process["state"] == "Suspended");
             if (e.isProcess && t.from == S::Ready && t.to == S::Running) {
                 processStarted = true;
                 process = runningProcess(id, time);
                 messages.push_back(processMessage());
+            } else if (e.isProcess && processShown &&
+                       (t.to == S::Suspended || (t.from == S::Suspended && t.to == S::Running))) {
+                process["state"] = e.state;  // Suspend / Resume of the whole process
+                messages.push_back(processMessage());
             } else if (!e.isProcess && t.to == S::Running && process.is_object() &&
-                       process["state"] == "Running") {
+                       (process["state"] == "Running" || process["state"] == "Suspended")) {
                 process["activeSkill"] = id;
                 messages.push_back(processMessage());
             }
@@ -550,8 +698,8 @@ struct CellView::Impl {
             const auto it = skills.find(id);
             if (it == skills.end()) return;
             const bool runs = it->second.state == "Running" || it->second.state == "Suspended";
-            const bool shown =
-                process.is_object() && process["skill"] == id && process["state"] == "Running";
+            const bool shown = process.is_object() && process["skill"] == id &&
+                               (process["state"] == "Running" || process["state"] == "Suspended");
             if (!shown) {
                 // A run that began before this dashboard saw it start; else an old value.
                 if (!runs) return;

@@ -16,9 +16,11 @@
 #include <string>
 
 #include "dashboard/dashboard.hpp"
+#include "robot_rig.hpp"
 #include "sim/cell/ground_truth.hpp"
 #include "sim/cell/simulator.hpp"
 #include "skill/client/generic_client.hpp"
+#include "skill/client/typed_clients.hpp"
 #include "skill/demo/demo_skills.hpp"
 #include "support/inbox.hpp"
 #include "support/loopback_server.hpp"
@@ -265,6 +267,56 @@ TEST(CellView, WorldCarriesWhatTheThreeDViewDraws) {
     EXPECT_EQ(snap["docks"], world["docks"]);
     view.stop();
     truth.stop();
+}
+
+// Real hardware has no ground truth: the 3D view follows the robot's own OPC 40010 nodes
+// (Axes/<axis>/ParameterSet/ActualPosition, the DI Model, WorldToRobotBase) while the
+// robot's server is there, and the robot leaves the world with its server.
+TEST(CellView, WithoutAGroundTruthTheWorldFollowsTheRobotsRoboticsNodes) {
+    auto rig = std::make_unique<pnp::testing::Rig>();
+    Inbox<json> inbox;
+    pnp::dashboard::CellViewOptions options;
+    options.discovery = false;
+    options.urls = {pnp::testing::url(rig->server)};
+    pnp::dashboard::CellView view(nullptr, options,
+                                  [&](std::string m) { inbox.put(json::parse(m)); });
+    view.start();
+    const auto near = [](const json& a, const auto& b, double tolerance) {
+        if (!a.is_array() || a.size() != b.size()) return false;
+        for (std::size_t i = 0; i < b.size(); ++i)
+            if (!a[i].is_number() || std::abs(a[i].get<double>() - b[i]) > tolerance) return false;
+        return true;
+    };
+    auto worldWith = [&](const std::function<bool(const json&)>& pred) {
+        return inbox.waitFor(
+            [&](const std::vector<json>& v) {
+                return std::any_of(v.begin(), v.end(),
+                                   [&](const json& m) { return m["type"] == "world" && pred(m); });
+            },
+            20s);
+    };
+    ASSERT_TRUE(worldWith([&](const json& m) {
+        return near(m["joints"].value("Arm", json()), pnp::testing::kHome, 1e-6) &&
+               m["models"].value("Arm", json()) == "FakeArm" &&
+               near(m["bases"].value("Arm", json()), std::vector<double>(6, 0.0), 1e-12);
+    })) << (inbox.items().empty() ? json() : inbox.items().back()).dump();
+    EXPECT_TRUE(view.snapshot()["world"]["joints"].contains("Arm"));
+
+    // A move: the joints in the world follow the arm to its goal.
+    pnp::skill::client::JointPtpMoveSkillClient move(
+        rig->ua, rig->skill(pnp::device::robot::skill_names::JointPtpMove), 5s);
+    pnp::robot::Joints goal = pnp::testing::kHome;
+    goal[0] += 0.4;
+    goal[5] -= 0.3;
+    const auto r = move.run({{goal.begin(), goal.end()}, {}, {}, ""}, 20s);
+    ASSERT_EQ(r.result, pnp::skill::SkillResult::Completed) << r.message;
+    EXPECT_TRUE(worldWith(
+        [&](const json& m) { return near(m["joints"].value("Arm", json()), goal, 1e-4); }));
+
+    // The robot's server goes: so does the robot.
+    rig.reset();
+    EXPECT_TRUE(worldWith([](const json& m) { return !m["joints"].contains("Arm"); }));
+    view.stop();
 }
 
 class DashboardActions : public ::testing::Test {
