@@ -178,6 +178,8 @@ struct CellView::Impl {
     // monitoring thread only
     struct Link {
         std::shared_ptr<ua::client::Client> client;
+        // The skills' transition events, all on one subscription of the session.
+        std::shared_ptr<ua::client::Subscription> events;
         std::map<std::string, std::unique_ptr<GenericSkillClient>> skills;
         struct ProgressWatch {  // the MES's ExecuteProcess/Progress
             ua::client::Subscription subscription;
@@ -416,8 +418,20 @@ struct CellView::Impl {
                 client->startBackgroundThread();
                 link.client = std::move(client);
             }
+            if (!link.events) {
+                ua::client::SubscriptionSettings settings;
+                settings.publishingInterval = 10;  // an event reaches the page about one RTT
+                settings.maxKeepAliveCount = 100;  // after its transition
+                settings.lifetimeCount = 6000;
+                link.events = std::make_shared<ua::client::Subscription>(
+                    *link.client, settings, ua::client::SubscriptionStatusCallback{},
+                    options.requestTimeout);
+            }
             const ua::client::Deadline deadline(options.requestTimeout * 3);
-            auto sc = std::make_unique<GenericSkillClient>(link.client, d.node, deadline);
+            skill::client::SkillClientOptions clientOptions;
+            clientOptions.subscription = link.events;
+            auto sc =
+                std::make_unique<GenericSkillClient>(link.client, d.node, deadline, clientOptions);
             for (const auto& p : sc->parameters())
                 parameters.push_back(
                     {{"name", p.name},

@@ -511,14 +511,16 @@ void SkillClient::subscribeTransitions(Deadline deadline) {
     std::lock_guard lock(subscribeMutex_);
     if (events_.valid()) return;
     const Clock::time_point end = resolve(deadline);
-    if (!subscription_.valid()) {
+    ua::client::Subscription& subscription =
+        options_.subscription ? *options_.subscription : subscription_;
+    if (!subscription.valid()) {
         ua::client::SubscriptionSettings s;
         // Small interval: a waiting Publish is answered as soon as the interval allows, so
         // an event reaches us about one round trip after the transition.
         s.publishingInterval = options_.publishingInterval;
         s.maxKeepAliveCount = 100;
         s.lifetimeCount = 6000;
-        subscription_ = ua::client::Subscription(*client_, s, {}, end);
+        subscription = ua::client::Subscription(*client_, s, {}, end);
     }
     ua::client::EventOptions o;
     o.select = kEventSelect;
@@ -526,7 +528,7 @@ void SkillClient::subscribeTransitions(Deadline deadline) {
     o.where = ua::client::whereOfType(
         ua::NodeId(client_->namespaceIndex(kBaseUri, end), types::SkillTransitionEventType.id));
     o.queueSize = 1000;
-    events_ = subscription_.monitorEvents(
+    events_ = subscription.monitorEvents(
         node_, std::move(o),
         [queue = queue_, source = node_](ua::client::EventFields& e) {
             Transition t = transitionOf(e);

@@ -106,6 +106,11 @@ struct SkillClientOptions {
     double publishingInterval = 10;
     // The time given to Halt / ExitLock after run()'s deadline passed or it was cancelled.
     std::chrono::milliseconds cleanupTime{2000};
+    // A subscription of the same session that the transition events' item is created on,
+    // shared by many skills (a dashboard or an MES watching hundreds: one subscription and
+    // one waiting Publish per session instead of one per skill; created by the caller); null:
+    // the client's own.
+    std::shared_ptr<ua::client::Subscription> subscription{};
 };
 
 class SkillClient {
