@@ -1,0 +1,226 @@
+#!/usr/bin/env python3
+"""The server under many clients (issue 26): N client processes against one server.
+
+  python3 bench/load/load_bench.py [--clients 1,8,32] [--seconds 5] [--mix call]
+      [--payload 2] [--client pnp|node] [--build build]
+      [--url URL --server-pid PID [--namespace URI]]   (a server started by you, e.g.
+                                                       open62541's, instead of ours)
+      [--soak SECONDS [--sample-every 10]]
+      [--json OUT]
+
+Per client count, one round: the server (ours: pnp_bench_server --ticker 5, started here;
+else the one at --url) and N client processes (pnp_bench_load_client, or node-opcua's with
+--client node: bench/load/node_load_client.js), all starting at the same instant, each
+running the mix for --seconds and checking every response (see load_client.cpp). Reported:
+calls/s (sum over clients), latency median and p99 (merged histograms), the server's CPU per
+call (utime + stime from /proc/PID/stat over the round / calls), its RSS and open file
+descriptors after the round, and errors, mismatches (a response that is not the request's),
+notifications out of sequence (publish mix).
+
+--soak SECONDS: one round of --clients (the first count) for that long; the server's RSS and
+descriptors are sampled every --sample-every seconds and their growth from the first tenth
+to the last tenth of the run is reported (the issue's soak: 1 hour, no growth, nothing lost,
+nothing out of sequence).
+
+Processes are stopped by PID (SIGTERM, then SIGKILL after 3 s); every wait has a deadline.
+Loopback only. Not a test: nothing here runs in CI.
+"""
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def proc_cpu_seconds(pid):
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICK  # utime, stime
+
+
+def proc_rss_kib(pid):
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    return 0
+
+
+def proc_fds(pid):
+    try:
+        return len(os.listdir(f"/proc/{pid}/fd"))
+    except OSError:
+        return -1
+
+
+def stop(p, grace=3.0):
+    if p.poll() is not None:
+        return
+    p.send_signal(signal.SIGTERM)
+    try:
+        p.wait(timeout=grace)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait(timeout=grace)
+
+
+def percentile(hist, q):
+    total = sum(hist.values())
+    if total == 0:
+        return float("nan")
+    rank = max(1, int(-(-q * total // 1)))  # nearest rank
+    seen = 0
+    for us in sorted(hist):
+        seen += hist[us]
+        if seen >= rank:
+            return us
+    return max(hist)
+
+
+def start_our_server(build):
+    exe = os.path.join(build, "bench", "pnp_bench_server")
+    if not os.access(exe, os.X_OK):
+        sys.exit(f"missing {exe}: build with -DPNP_BUILD_BENCH=ON")
+    p = subprocess.Popen([exe, "--port", "0", "--ticker", "5"], stdout=subprocess.PIPE,
+                         text=True)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        line = p.stdout.readline()
+        if line.startswith("listening on "):
+            return p, line.split()[-1]
+        if not line and p.poll() is not None:
+            break
+    stop(p)
+    sys.exit("pnp_bench_server did not start")
+
+
+def client_argv(args, url, i, start_at):
+    common = ["--mix", args.mix, "--seconds", str(args.seconds), "--payload",
+              str(args.payload), "--id", str(i), "--namespace", args.namespace,
+              "--start-at", str(start_at)]
+    if args.client == "node":
+        return ["node", os.path.join(ROOT, "bench", "load", "node_load_client.js"), url] + common
+    return [os.path.join(args.build, "bench", "load", "pnp_bench_load_client"), url] + common
+
+
+def round_(args, url, server_pid, clients, seconds, sample_every=None):
+    start_at = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + int(
+        (1.0 + 0.05 * clients) * 1e9) + (3_000_000_000 if args.client == "node" else 0)
+    procs = [subprocess.Popen(client_argv(args, url, i, start_at), stdout=subprocess.PIPE,
+                              text=True) for i in range(clients)]
+    # CPU from the common start to the end of the last client.
+    while time.clock_gettime_ns(time.CLOCK_MONOTONIC) < start_at:
+        time.sleep(0.001)
+    cpu0 = proc_cpu_seconds(server_pid)
+    samples = []
+    deadline = time.monotonic() + seconds + 60 + clients
+    next_sample = time.monotonic()
+    while any(p.poll() is None for p in procs) and time.monotonic() < deadline:
+        if sample_every and time.monotonic() >= next_sample:
+            samples.append((time.monotonic(), proc_rss_kib(server_pid), proc_fds(server_pid)))
+            next_sample += sample_every
+        time.sleep(0.05)
+    cpu1 = proc_cpu_seconds(server_pid)
+    hist, calls, errors, mismatches, notes, order, failed, elapsed = {}, 0, 0, 0, 0, 0, 0, 0.0
+    for p in procs:
+        if p.poll() is None:
+            stop(p)
+            failed += 1
+            continue
+        out = p.stdout.read().strip().splitlines()
+        r = json.loads(out[-1]) if out else {"error": "no output"}
+        if "error" in r:
+            failed += 1
+            continue
+        calls += r["calls"]
+        errors += r["errors"]
+        mismatches += r["mismatches"]
+        notes += r["notifications"]
+        order += r["outOfOrder"]
+        elapsed = max(elapsed, r["seconds"])
+        for us, n in r["hist"]:
+            hist[us] = hist.get(us, 0) + n
+    return {
+        "clients": clients, "calls": calls, "callsPerSecond": calls / elapsed if elapsed else 0,
+        "medianUs": percentile(hist, 0.5), "p99Us": percentile(hist, 0.99),
+        "serverCpuPerCallUs": (cpu1 - cpu0) * 1e6 / calls if calls else float("nan"),
+        "serverRssKiB": proc_rss_kib(server_pid), "serverFds": proc_fds(server_pid),
+        "errors": errors, "mismatches": mismatches, "notifications": notes,
+        "outOfOrder": order, "failedClients": failed, "samples": samples,
+    }
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--clients", default="1,8,32")
+    ap.add_argument("--seconds", type=float, default=5)
+    ap.add_argument("--mix", default="call",
+                    choices=["call", "read", "write", "mixed", "publish"])
+    ap.add_argument("--payload", type=int, default=2)
+    ap.add_argument("--client", default="pnp", choices=["pnp", "node"])
+    ap.add_argument("--build", default=os.path.join(ROOT, "build"))
+    ap.add_argument("--url")
+    ap.add_argument("--server-pid", type=int)
+    ap.add_argument("--namespace", default="urn:pnp:demo")
+    ap.add_argument("--soak", type=float)
+    ap.add_argument("--sample-every", type=float, default=10)
+    ap.add_argument("--json")
+    args = ap.parse_args()
+    counts = [int(c) for c in args.clients.split(",") if c]
+    if not counts or min(counts) < 1 or max(counts) > 2000:
+        sys.exit("--clients: counts between 1 and 2000")
+    if bool(args.url) != bool(args.server_pid):
+        sys.exit("--url and --server-pid go together")
+    server = None
+    url, pid = args.url, args.server_pid
+    if not url:
+        server, url = start_our_server(args.build)
+        pid = server.pid
+    results = []
+    try:
+        print(f"server {url} (pid {pid}), client {args.client}, mix {args.mix}, "
+              f"payload {args.payload} B, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f}")
+        if args.soak:
+            r = round_(args, url, pid, counts[0], args.soak, args.sample_every)
+            s = r["samples"]
+            tenth = max(1, len(s) // 10)
+            first, last = s[:tenth], s[-tenth:]
+            avg = lambda xs, k: sum(x[k] for x in xs) / len(xs) if xs else float("nan")
+            r["rssGrowthKiB"] = avg(last, 1) - avg(first, 1)
+            r["fdGrowth"] = avg(last, 2) - avg(first, 2)
+            results.append(r)
+            print(f"soak {args.soak:.0f} s, {counts[0]} clients: {r['callsPerSecond']:.0f} calls/s, "
+                  f"RSS growth {r['rssGrowthKiB']:.0f} KiB, fd growth {r['fdGrowth']:.1f}, "
+                  f"errors {r['errors']}, mismatches {r['mismatches']}, "
+                  f"out of sequence {r['outOfOrder']} of {r['notifications']} notifications")
+        else:
+            print(" clients |   calls/s |  median µs |    p99 µs | server CPU/call µs | RSS MiB "
+                  "| fds | errors mism. order")
+            for n in counts:
+                r = round_(args, url, pid, n, args.seconds)
+                results.append(r)
+                print(f" {n:7d} | {r['callsPerSecond']:9.0f} | {r['medianUs']:10.0f} | "
+                      f"{r['p99Us']:9.0f} | {r['serverCpuPerCallUs']:18.1f} | "
+                      f"{r['serverRssKiB'] / 1024:7.1f} | {r['serverFds']:3d} | "
+                      f"{r['errors']} {r['mismatches']} {r['outOfOrder']}"
+                      + (f"  ({r['failedClients']} clients failed)" if r["failedClients"] else ""),
+                      flush=True)
+    finally:
+        if server:
+            stop(server)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(results, f, indent=1)
+    bad = any(r["errors"] or r["mismatches"] or r["outOfOrder"] or r["failedClients"]
+              for r in results)
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
