@@ -132,7 +132,8 @@ def round_(args, url, server_pid, clients, seconds, sample_every=None):
             stop(p)
             failed += 1
             continue
-        out = p.stdout.read().strip().splitlines()
+        # node-opcua may print its own lines on stdout: the result is the last JSON line.
+        out = [l for l in p.stdout.read().splitlines() if l.startswith('{"id"')]
         r = json.loads(out[-1]) if out else {"error": "no output"}
         if "error" in r:
             failed += 1
@@ -209,6 +210,7 @@ def main():
                       f"{r['p99Us']:9.0f} | {r['serverCpuPerCallUs']:18.1f} | "
                       f"{r['serverRssKiB'] / 1024:7.1f} | {r['serverFds']:3d} | "
                       f"{r['errors']} {r['mismatches']} {r['outOfOrder']}"
+                      + (f" of {r['notifications']} notifications" if args.mix == "publish" else "")
                       + (f"  ({r['failedClients']} clients failed)" if r["failedClients"] else ""),
                       flush=True)
     finally:
