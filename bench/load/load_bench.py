@@ -5,6 +5,8 @@
       [--payload 2] [--client pnp|node] [--build build]
       [--url URL --server-pid PID [--namespace URI]]   (a server started by you, e.g.
                                                        open62541's, instead of ours)
+      [--open62541 EXE]                                 (open62541's server in the same run:
+                                                       bench/load/build_open62541_server.sh)
       [--soak SECONDS [--sample-every 10]]
       [--json OUT]
 
@@ -99,6 +101,26 @@ def start_our_server(build):
     sys.exit("pnp_bench_server did not start")
 
 
+def free_port():
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start_o6_server(exe):
+    p = subprocess.Popen([exe, str(free_port())], stdout=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        line = p.stdout.readline()
+        if line.startswith("listening on "):
+            return p, line.split()[-1]
+        if not line and p.poll() is not None:
+            break
+    stop(p)
+    sys.exit(f"{exe} did not start")
+
+
 def client_argv(args, url, i, start_at):
     common = ["--mix", args.mix, "--seconds", str(args.seconds), "--payload",
               str(args.payload), "--id", str(i), "--namespace", args.namespace,
@@ -169,6 +191,7 @@ def main():
     ap.add_argument("--url")
     ap.add_argument("--server-pid", type=int)
     ap.add_argument("--namespace", default="urn:pnp:demo")
+    ap.add_argument("--open62541")
     ap.add_argument("--soak", type=float)
     ap.add_argument("--sample-every", type=float, default=10)
     ap.add_argument("--json")
@@ -183,6 +206,11 @@ def main():
     if not url:
         server, url = start_our_server(args.build)
         pid = server.pid
+    o6 = None
+    if args.open62541:
+        if args.soak:
+            sys.exit("--open62541 is for the table, not --soak")
+        o6, o6_url = start_o6_server(args.open62541)
     results = []
     try:
         print(f"server {url} (pid {pid}), client {args.client}, mix {args.mix}, "
@@ -201,21 +229,35 @@ def main():
                   f"errors {r['errors']}, mismatches {r['mismatches']}, "
                   f"out of sequence {r['outOfOrder']} of {r['notifications']} notifications")
         else:
-            print(" clients |   calls/s |  median µs |    p99 µs | server CPU/call µs | RSS MiB "
+            print(("    " if o6 else "") + " clients |   calls/s |  median µs |    p99 µs | server CPU/call µs | RSS MiB "
                   "| fds | errors mism. order")
-            for n in counts:
-                r = round_(args, url, pid, n, args.seconds)
-                results.append(r)
-                print(f" {n:7d} | {r['callsPerSecond']:9.0f} | {r['medianUs']:10.0f} | "
+            def row(label, n, r):
+                print(f"{label}{n:7d} | {r['callsPerSecond']:9.0f} | {r['medianUs']:10.0f} | "
                       f"{r['p99Us']:9.0f} | {r['serverCpuPerCallUs']:18.1f} | "
                       f"{r['serverRssKiB'] / 1024:7.1f} | {r['serverFds']:3d} | "
                       f"{r['errors']} {r['mismatches']} {r['outOfOrder']}"
                       + (f" of {r['notifications']} notifications" if args.mix == "publish" else "")
                       + (f"  ({r['failedClients']} clients failed)" if r["failedClients"] else ""),
                       flush=True)
+
+            for n in counts:
+                r = round_(args, url, pid, n, args.seconds)
+                r["server"] = "pnp" if server else "given"
+                results.append(r)
+                row("pnp " if o6 else "", n, r)
+                if o6:
+                    q = round_(args, o6_url, o6.pid, n, args.seconds)
+                    q["server"] = "open62541"
+                    results.append(q)
+                    row("o6  ", n, q)
+                    print(f"     ratio pnp/open62541: calls/s {r['callsPerSecond'] / max(1, q['callsPerSecond']):.2f}"
+                          f", CPU per call {r['serverCpuPerCallUs'] / q['serverCpuPerCallUs']:.2f}"
+                          f", p99 {r['p99Us'] / max(1, q['p99Us']):.2f}", flush=True)
     finally:
         if server:
             stop(server)
+        if o6:
+            stop(o6)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=1)
