@@ -133,17 +133,18 @@ int main(int argc, char** argv) {
             const ua::ByteString mine{std::string_view(buffer)};
             const std::int64_t before = monotonicNs();
             if (before >= end) break;
-            const std::string kind =
-                mix == "mixed" ? (n % 3 == 0 ? "call" : n % 3 == 1 ? "read" : "write")
-                : mix == "publish" ? "read"
-                                   : mix;
+            const std::string kind = mix == "mixed"     ? (n % 3 == 0   ? "call"
+                                                           : n % 3 == 1 ? "read"
+                                                                        : "write")
+                                     : mix == "publish" ? "read"
+                                                        : mix;
             try {
                 if (kind == "call") {
                     const auto r =
                         client.call(object, echo, {ua::Variant(mine)}, std::chrono::seconds(5));
-                    const auto* out =
-                        r.ok() && r.outputs.size() == 1 ? r.outputs[0].scalar<ua::ByteString>()
-                                                        : nullptr;
+                    const auto* out = r.ok() && r.outputs.size() == 1
+                                          ? r.outputs[0].scalar<ua::ByteString>()
+                                          : nullptr;
                     if (!r.ok())
                         ++errors;
                     else if (!out || *out != mine)

@@ -26,10 +26,10 @@ static void stopHandler(int sig) {
     running = false;
 }
 
-static UA_StatusCode echo(UA_Server *server, const UA_NodeId *sessionId, void *sessionContext,
-                          const UA_NodeId *methodId, void *methodContext,
-                          const UA_NodeId *objectId, void *objectContext, size_t inputSize,
-                          const UA_Variant *input, size_t outputSize, UA_Variant *output) {
+static UA_StatusCode echo(UA_Server* server, const UA_NodeId* sessionId, void* sessionContext,
+                          const UA_NodeId* methodId, void* methodContext, const UA_NodeId* objectId,
+                          void* objectContext, size_t inputSize, const UA_Variant* input,
+                          size_t outputSize, UA_Variant* output) {
     (void)server, (void)sessionId, (void)sessionContext, (void)methodId, (void)methodContext;
     (void)objectId, (void)objectContext, (void)outputSize;
     if (inputSize != 1 || !UA_Variant_hasScalarType(&input[0], &UA_TYPES[UA_TYPES_BYTESTRING]))
@@ -37,7 +37,7 @@ static UA_StatusCode echo(UA_Server *server, const UA_NodeId *sessionId, void *s
     return UA_Variant_setScalarCopy(output, input[0].data, &UA_TYPES[UA_TYPES_BYTESTRING]);
 }
 
-static void tick(UA_Server *server, void *data) {
+static void tick(UA_Server* server, void* data) {
     (void)data;
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -47,22 +47,21 @@ static void tick(UA_Server *server, void *data) {
     UA_Server_writeValue(server, UA_NODEID_STRING(ns, "Bench.Ticker"), v);
 }
 
-static void addVariable(UA_Server *server, const char *id, const char *name, const void *value,
-                        const UA_DataType *type, UA_Byte access) {
+static void addVariable(UA_Server* server, const char* id, const char* name, const void* value,
+                        const UA_DataType* type, UA_Byte access) {
     UA_VariableAttributes a = UA_VariableAttributes_default;
     UA_Variant_setScalarCopy(&a.value, value, type);
     a.dataType = type->typeId;
     a.accessLevel = access;
-    a.displayName = UA_LOCALIZEDTEXT("", (char *)(uintptr_t)name);
-    UA_Server_addVariableNode(server, UA_NODEID_STRING(ns, (char *)(uintptr_t)id),
-                              UA_NODEID_STRING(ns, "Demo"),
-                              UA_NODEID_NUMERIC(0, UA_NS0ID_HASCOMPONENT),
-                              UA_QUALIFIEDNAME(ns, (char *)(uintptr_t)name),
-                              UA_NODEID_NUMERIC(0, UA_NS0ID_BASEDATAVARIABLETYPE), a, NULL, NULL);
+    a.displayName = UA_LOCALIZEDTEXT("", (char*)(uintptr_t)name);
+    UA_Server_addVariableNode(
+        server, UA_NODEID_STRING(ns, (char*)(uintptr_t)id), UA_NODEID_STRING(ns, "Demo"),
+        UA_NODEID_NUMERIC(0, UA_NS0ID_HASCOMPONENT), UA_QUALIFIEDNAME(ns, (char*)(uintptr_t)name),
+        UA_NODEID_NUMERIC(0, UA_NS0ID_BASEDATAVARIABLETYPE), a, NULL, NULL);
     UA_Variant_clear(&a.value);
 }
 
-int main(int argc, char **argv) {
+int main(int argc, char** argv) {
     if (argc != 2) {
         fprintf(stderr, "usage: %s PORT\n", argv[0]);
         return 2;
@@ -70,8 +69,8 @@ int main(int argc, char **argv) {
     const int port = atoi(argv[1]);
     signal(SIGINT, stopHandler);
     signal(SIGTERM, stopHandler);
-    UA_Server *server = UA_Server_new();
-    UA_ServerConfig *config = UA_Server_getConfig(server);
+    UA_Server* server = UA_Server_new();
+    UA_ServerConfig* config = UA_Server_getConfig(server);
     UA_ServerConfig_setMinimal(config, (UA_UInt16)port, NULL);
     config->maxSessions = 10000;
     config->maxSecureChannels = 10000;
@@ -97,8 +96,7 @@ int main(int argc, char **argv) {
     ma.displayName = UA_LOCALIZEDTEXT("", "Echo");
     ma.executable = true;
     ma.userExecutable = true;
-    UA_Server_addMethodNode(server, UA_NODEID_STRING(ns, "Demo.Echo"),
-                            UA_NODEID_STRING(ns, "Demo"),
+    UA_Server_addMethodNode(server, UA_NODEID_STRING(ns, "Demo.Echo"), UA_NODEID_STRING(ns, "Demo"),
                             UA_NODEID_NUMERIC(0, UA_NS0ID_HASCOMPONENT),
                             UA_QUALIFIEDNAME(ns, "Echo"), ma, echo, 1, &in, 1, &out, NULL, NULL);
 
