@@ -129,13 +129,13 @@ struct SecurityPolicy {
     std::string_view asymmetricSignatureUri;  // SignatureData.Algorithm in sessions
     AsymmetricEncryption asymmetricEncryption;
     std::string_view asymmetricEncryptionUri;  // UserNameIdentityToken.EncryptionAlgorithm
-    std::size_t signingKeyLength;     // symmetric HMAC-SHA256 key: 32
-    std::size_t encryptingKeyLength;  // AES-CBC key: 32 / 16 / 32
-    std::size_t blockSize;            // AES block: 16
-    std::size_t signatureSize;        // HMAC-SHA256: 32
-    std::size_t nonceLength;          // 32
-    int minKeyBits;                   // 2048
-    int maxKeyBits;                   // 4096
+    std::size_t signingKeyLength;              // symmetric HMAC-SHA256 key: 32
+    std::size_t encryptingKeyLength;           // AES-CBC key: 32 / 16 / 32
+    std::size_t blockSize;                     // AES block: 16
+    std::size_t signatureSize;                 // HMAC-SHA256: 32
+    std::size_t nonceLength;                   // 32
+    int minKeyBits;                            // 2048
+    int maxKeyBits;                            // 4096
 };
 
 inline constexpr std::string_view kNoneUri = "http://opcfoundation.org/UA/SecurityPolicy#None";

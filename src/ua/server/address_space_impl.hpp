@@ -236,8 +236,7 @@ struct AddressSpace::Impl {
     UInt32 userPermissions(NodeIndex i, const SessionIdentity* user) const {
         if (user == nullptr || !permissions.active) return permission::All;
         const auto* set = permissionSetOf(i);
-        return set ? (*set)->permissionsOf(*user, permissions.encryptionRequired)
-                   : permission::All;
+        return set ? (*set)->permissionsOf(*user, permissions.encryptionRequired) : permission::All;
     }
     bool checksPermissions(const SessionIdentity* user) const {
         return user != nullptr && permissions.active;

@@ -54,8 +54,8 @@ Byte userAccessLevelOf(UInt32 perms) {
     Byte keep = access_level::SemanticChange;
     if (perms & permission::Read) keep |= access_level::CurrentRead;
     if (perms & permission::Write)
-        keep |= access_level::CurrentWrite | access_level::StatusWrite |
-                access_level::TimestampWrite;
+        keep |=
+            access_level::CurrentWrite | access_level::StatusWrite | access_level::TimestampWrite;
     if (perms & permission::ReadHistory) keep |= access_level::HistoryRead;
     if (perms & (permission::InsertHistory | permission::ModifyHistory | permission::DeleteHistory))
         keep |= access_level::HistoryWrite;
@@ -333,8 +333,7 @@ StatusCode AddressSpace::checkValue(const Variant& value, const NodeId& dataType
 
 // ---- Read ----------------------------------------------------------------------------------
 DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>& lock,
-                                            const ReadValueId& item,
-                                            TimestampsToReturn timestamps,
+                                            const ReadValueId& item, TimestampsToReturn timestamps,
                                             const SessionIdentity* user) const {
     const NodeIndex i = find(item.nodeId);
     if (i == kNoNode) return bad(status::BadNodeIdUnknown);
@@ -345,8 +344,9 @@ DataValue AddressSpace::Impl::readAttribute(std::shared_lock<std::shared_mutex>&
     const bool checked = checksPermissions(user);
     const UInt32 perms = checked ? userPermissions(i, user) : permission::All;
     if (checked) {
-        const UInt32 needed = attr == AttributeId::Value             ? permission::Read
-                              : attr == AttributeId::RolePermissions ? permission::ReadRolePermissions
+        const UInt32 needed = attr == AttributeId::Value ? permission::Read
+                              : attr == AttributeId::RolePermissions
+                                  ? permission::ReadRolePermissions
                               : attr == AttributeId::UserRolePermissions ? 0u
                                                                          : permission::Browse;
         if ((perms & needed) != needed) return bad(status::BadUserAccessDenied);
@@ -552,7 +552,7 @@ ReadResponse AddressSpace::read(const ReadRequest& request, const SessionIdentit
 }
 
 DataValue AddressSpace::read(const ReadValueId& item, TimestampsToReturn timestamps,
-                            const SessionIdentity* user) const {
+                             const SessionIdentity* user) const {
     const auto ts = static_cast<Int32>(timestamps);
     if (ts < 0 || ts > 3) return bad(status::BadTimestampsToReturnInvalid);
     std::shared_lock lock(impl_->mutex);

@@ -342,8 +342,7 @@ StatusCode LocalDiscovery::apply(Registration reg) {
 namespace {
 // Whether a registration may go on: over a secured channel only for the server its
 // certificate names; over None only where insecure registration is allowed.
-StatusCode registrationAllowed(const RegisteredServer& server,
-                               const RegistrationChannel& channel,
+StatusCode registrationAllowed(const RegisteredServer& server, const RegistrationChannel& channel,
                                bool allowInsecure) {
     if (!channel.secured) return allowInsecure ? status::Good : status::BadSecurityModeInsufficient;
     const auto& uris = channel.certificateUris;
