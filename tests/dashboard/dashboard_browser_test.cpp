@@ -114,8 +114,8 @@ TEST(DashboardBrowser, TheCellLiveInChromium) {
         {node, std::string(PNP_SOURCE_DIR) + "/tests/dashboard/browser/dashboard_test.js", "--url",
          url, "--screenshot", screenshot.string(), "--run", "UR5/JointPtpMove", "--params",
          R"({"TargetJointPosition":"[0.3,-1.5707963267949,1.5707963267949,-1.5707963267949,-1.5707963267949,0]"})",
-         "--expect-states", "Running,Ready", "--wait-gone", "PickAndPlace", "--timeout-ms",
-         "150000"},
+         "--expect-states", "Running,Ready", "--wait-gone", "PickAndPlace", "--min-components", "4",
+         "--timeout-ms", "150000"},
         tmpPath("browser.stderr"), error))
         << error;
     ASSERT_TRUE(browser.waitForPrefix(R"({"event":"waiting-gone")", 150s, error))

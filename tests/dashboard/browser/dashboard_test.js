@@ -14,6 +14,7 @@
 //     [--expect-run-error]                 instead: the server's error must be shown and the
 //                                          skill must not leave its state
 //     [--start-process IRI]                click Start process; the process panel must show it
+//     [--min-components N]                 first wait (60 s at most) until the dashboard knows N
 //     [--wait-gone COMPONENT]              prints {"event":"waiting-gone",...}; the caller kills
 //                                          the component; its card must disappear
 //     [--observe-ms 0]                     keep watching (latencies, responsiveness) this long
@@ -28,7 +29,7 @@ const path = require('node:path');
 
 const kUsage = 'usage: dashboard_test.js --url URL [--screenshot PATH] [--login USER:PASSWORD [--expect-login-error]] ' +
     '[--run SKILL [--params JSON] [--expect-states A,B | --expect-run-error]] [--start-process IRI] ' +
-    '[--wait-gone COMPONENT] [--observe-ms MS] [--max-median-latency-ms X] [--max-lag-ms Y] ' +
+    '[--min-components N] [--wait-gone COMPONENT] [--observe-ms MS] [--max-median-latency-ms X] [--max-lag-ms Y] ' +
     '[--max-ready-ms Z] [--timeout-ms MS] [--chromium PATH] [--window WxH]';
 
 // Chromium's flags on this machine: no GPU, and no background connections (the network is
@@ -72,6 +73,7 @@ function parseArguments(argv) {
       case '--expect-run-error': options.expectRunError = true; break;
       case '--start-process': options.startProcess = value(i++); break;
       case '--wait-gone': options.waitGone = value(i++); break;
+      case '--min-components': options.minComponents = number(i++, 0, 100000); break;
       case '--observe-ms': options.observeMs = number(i++, 0, 600000); break;
       case '--max-median-latency-ms': options.maxMedianLatencyMs = number(i++, 0, 1e6); break;
       case '--max-lag-ms': options.maxLagMs = number(i++, 0, 1e6); break;
@@ -183,7 +185,13 @@ async function main() {
   process.on('SIGINT', () => emergencyExit('interrupted (SIGINT)'));
 
   try {
-    const expected = await bounded(expectedComponents(options.url, step(10000)), step(12000), 'GET /api/snapshot');
+    // A cell that was just started: its components are still being detected; wait (bounded)
+    // until the dashboard knows at least --min-components of them.
+    let expected = await bounded(expectedComponents(options.url, step(10000)), step(12000), 'GET /api/snapshot');
+    for (const until = Date.now() + step(60000); expected.size < (options.minComponents || 0) && Date.now() < until;) {
+      await new Promise((resolve) => setTimeout(resolve, 200));
+      expected = await bounded(expectedComponents(options.url, step(10000)), step(12000), 'GET /api/snapshot');
+    }
     result.components = { expected: expected.size, shown: 0, missing: [] };
 
     browser = await bounded(puppeteer.launch({
