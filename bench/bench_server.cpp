@@ -2,7 +2,10 @@
 // anonymous access) built only on pnp_ua_server + pnp_ua_demo, without the CLI. Used by the
 // benchmark with --server bench (and to tell what the CLI itself adds to start-up and RSS).
 //
-//   pnp_bench_server [--host 127.0.0.1] [--port N] [--ticker MS]
+//   pnp_bench_server [--host 127.0.0.1] [--port N] [--ticker MS] [--max-sessions N]
+//
+// --max-sessions N: sessions (and connections) allowed at once (default: the server's 100
+// sessions, 1000 connections), for bench/load's many-sessions runs.
 //
 // --ticker MS: a variable ns=<demo>;s=Bench.Ticker (Int64) set every MS ms by a thread of
 // its own (AddressSpace::setValue) to CLOCK_MONOTONIC in ns taken just before the call: a
@@ -30,6 +33,7 @@ int main(int argc, char** argv) {
     std::string host = "127.0.0.1";
     int port = 0;
     int tickerMs = 0;
+    long maxSessions = 0;
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
         if (a == "--host" && i + 1 < argc)
@@ -38,8 +42,12 @@ int main(int argc, char** argv) {
             port = std::stoi(argv[++i]);
         else if (a == "--ticker" && i + 1 < argc)
             tickerMs = std::stoi(argv[++i]);
+        else if (a == "--max-sessions" && i + 1 < argc)
+            maxSessions = std::clamp(std::stol(argv[++i]), 1L, 100000L);
         else {
-            std::fprintf(stderr, "usage: %s [--host ADDR] [--port N] [--ticker MS]\n", argv[0]);
+            std::fprintf(stderr,
+                         "usage: %s [--host ADDR] [--port N] [--ticker MS] [--max-sessions N]\n",
+                         argv[0]);
             return 2;
         }
     }
@@ -53,6 +61,11 @@ int main(int argc, char** argv) {
         config.host = host;
         config.publicHost = host;
         config.port = static_cast<UInt16>(port);
+        if (maxSessions > 0) {
+            config.maxSessions = static_cast<UInt32>(maxSessions);
+            config.transport.maxConnections = std::max<std::size_t>(
+                config.transport.maxConnections, static_cast<std::size_t>(maxSessions) + 16);
+        }
         // Section (e) also runs with changes every few ms (--tick-ms): allow publishing
         // intervals down to 1 ms (the product default stays 10 ms).
         if (tickerMs > 0) config.subscriptionLimits.minPublishingIntervalMs = 1;

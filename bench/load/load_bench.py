@@ -8,6 +8,7 @@
       [--open62541 EXE]                                 (open62541's server in the same run:
                                                        bench/load/build_open62541_server.sh)
       [--soak SECONDS [--sample-every 10]]
+      [--sessions N [--per-process 250]]
       [--json OUT]
 
 Per client count, one round: the server (ours: pnp_bench_server --ticker 5, started here;
@@ -23,6 +24,11 @@ notifications out of sequence (publish mix).
 descriptors are sampled every --sample-every seconds and their growth from the first tenth
 to the last tenth of the run is reported (the issue's soak: 1 hour, no growth, nothing lost,
 nothing out of sequence).
+
+--sessions N: N idle sessions (each with a subscription and a monitored item) held by
+ceil(N / --per-process) processes; reported: the server's RSS per idle session, and the p99
+of one client's Read loop with the N sessions open next to the same loop before they were
+(our server runs with --max-sessions N + 100).
 
 Processes are stopped by PID (SIGTERM, then SIGKILL after 3 s); every wait has a deadline.
 Loopback only. Not a test: nothing here runs in CI.
@@ -84,11 +90,12 @@ def percentile(hist, q):
     return max(hist)
 
 
-def start_our_server(build):
+def start_our_server(build, max_sessions=0):
     exe = os.path.join(build, "bench", "pnp_bench_server")
     if not os.access(exe, os.X_OK):
         sys.exit(f"missing {exe}: build with -DPNP_BUILD_BENCH=ON")
-    p = subprocess.Popen([exe, "--port", "0", "--ticker", "5"], stdout=subprocess.PIPE,
+    extra = ["--max-sessions", str(max_sessions)] if max_sessions else []
+    p = subprocess.Popen([exe, "--port", "0", "--ticker", "5"] + extra, stdout=subprocess.PIPE,
                          text=True)
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline:
@@ -178,6 +185,51 @@ def round_(args, url, server_pid, clients, seconds, sample_every=None):
     }
 
 
+def many_sessions(args, url, pid):
+    probe = dict(vars(args))
+    probe_args = argparse.Namespace(**{**probe, "mix": "read", "seconds": 3})
+    before = round_(probe_args, url, pid, 1, 3)
+    rss0 = proc_rss_kib(pid)
+    exe = os.path.join(args.build, "bench", "load", "pnp_bench_load_client")
+    holders, left, i = [], args.sessions, 0
+    hold = 60 + args.sessions / 50
+    while left > 0:
+        k = min(left, args.per_process)
+        holders.append(subprocess.Popen(
+            [exe, url, "--idle-sessions", str(k), "--seconds", str(hold), "--id", str(i),
+             "--namespace", args.namespace], stdout=subprocess.PIPE, text=True))
+        left -= k
+        i += 1
+    opened = 0
+    try:
+        deadline = time.monotonic() + 60 + args.sessions / 20
+        for h in holders:
+            while time.monotonic() < deadline:
+                line = h.stdout.readline()
+                if line.startswith("ready "):
+                    opened += int(line.split()[1])
+                    break
+                if not line:
+                    break
+        t_open = time.monotonic()
+        rss1 = proc_rss_kib(pid)
+        after = round_(probe_args, url, pid, 1, 3) if opened == args.sessions else None
+    finally:
+        for h in holders:
+            stop(h)
+    r = {"sessions": opened, "wanted": args.sessions,
+         "bytesPerSession": (rss1 - rss0) * 1024 / max(1, opened),
+         "p99Before": before["p99Us"], "p99With": after["p99Us"] if after else None,
+         "medianBefore": before["medianUs"], "medianWith": after["medianUs"] if after else None}
+    print(f"{opened} of {args.sessions} idle sessions open; server RSS {rss0 / 1024:.1f} -> "
+          f"{rss1 / 1024:.1f} MiB = {r['bytesPerSession'] / 1024:.1f} KiB per session")
+    if after:
+        print(f"Read loop of one client: median {before['medianUs']} -> {after['medianUs']} µs, "
+              f"p99 {before['p99Us']} -> {after['p99Us']} µs "
+              f"(ratio {after['p99Us'] / max(1, before['p99Us']):.2f}, target ≤ 2)")
+    return r
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -194,6 +246,8 @@ def main():
     ap.add_argument("--open62541")
     ap.add_argument("--soak", type=float)
     ap.add_argument("--sample-every", type=float, default=10)
+    ap.add_argument("--sessions", type=int)
+    ap.add_argument("--per-process", type=int, default=250)
     ap.add_argument("--json")
     args = ap.parse_args()
     counts = [int(c) for c in args.clients.split(",") if c]
@@ -203,8 +257,10 @@ def main():
         sys.exit("--url and --server-pid go together")
     server = None
     url, pid = args.url, args.server_pid
+    if args.sessions is not None and not 1 <= args.sessions <= 100000:
+        sys.exit("--sessions: 1 .. 100000")
     if not url:
-        server, url = start_our_server(args.build)
+        server, url = start_our_server(args.build, (args.sessions or 0) + 100 if args.sessions else 0)
         pid = server.pid
     o6 = None
     if args.open62541:
@@ -215,7 +271,9 @@ def main():
     try:
         print(f"server {url} (pid {pid}), client {args.client}, mix {args.mix}, "
               f"payload {args.payload} B, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f}")
-        if args.soak:
+        if args.sessions:
+            results.append(many_sessions(args, url, pid))
+        elif args.soak:
             r = round_(args, url, pid, counts[0], args.soak, args.sample_every)
             s = r["samples"]
             tenth = max(1, len(s) // 10)
@@ -261,7 +319,8 @@ def main():
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=1)
-    bad = any(r["errors"] or r["mismatches"] or r["outOfOrder"] or r["failedClients"]
+    bad = any(r.get("errors") or r.get("mismatches") or r.get("outOfOrder") or
+              r.get("failedClients") or r.get("sessions", 0) != r.get("wanted", r.get("sessions", 0))
               for r in results)
     return 1 if bad else 0
 

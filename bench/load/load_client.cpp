@@ -15,6 +15,9 @@
 //            --ticker MS): each notification's value must be greater than the last (none out
 //            of sequence, none duplicated); plus Read in the loop
 // --start-at: CLOCK_MONOTONIC ns at which to begin (all clients start together).
+// --idle-sessions K: instead of a mix, hold K idle sessions (each with a subscription and one
+//            monitored item on Scalar.Int32, publishing interval 1 s) for --seconds; prints
+//            "ready K" once all are open, then the JSON line {"id","sessions"} when closed.
 //
 // Output (one line): {"id","mix","calls","errors","mismatches","notifications",
 // "outOfOrder","seconds","hist":[[µs,count]...]} — the latency histogram is exact to 1 µs
@@ -28,6 +31,7 @@
 #include <cstdio>
 #include <cstring>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -66,6 +70,7 @@ int main(int argc, char** argv) {
     std::size_t payload = 2;
     int id = 0;
     std::int64_t startAt = 0;
+    int idleSessions = 0;
     for (int i = 2; i + 1 < argc; i += 2) {
         const std::string a = argv[i], v = argv[i + 1];
         if (a == "--mix")
@@ -80,6 +85,8 @@ int main(int argc, char** argv) {
             nsUri = v;
         else if (a == "--start-at")
             startAt = std::stoll(v);
+        else if (a == "--idle-sessions")
+            idleSessions = std::clamp(std::stoi(v), 1, 5000);
         else {
             std::fprintf(stderr, "unknown option %s\n", a.c_str());
             return 2;
@@ -88,6 +95,40 @@ int main(int argc, char** argv) {
     if (mix != "call" && mix != "read" && mix != "write" && mix != "mixed" && mix != "publish") {
         std::fprintf(stderr, "unknown mix %s\n", mix.c_str());
         return 2;
+    }
+    if (idleSessions > 0) {
+        // No background threads: the sessions stay idle (their Publish requests wait in the
+        // server), which is what an idle session costs it.
+        struct Held {
+            std::unique_ptr<ua::client::Client> client;
+            ua::client::Subscription subscription;
+            ua::client::MonitoredItem item;
+        };
+        std::vector<Held> held;
+        held.reserve(static_cast<std::size_t>(idleSessions));
+        try {
+            for (int k = 0; k < idleSessions; ++k) {
+                Held h;
+                h.client = std::make_unique<ua::client::Client>();
+                h.client->connect(url, ua::client::Anonymous{}, std::chrono::seconds(10));
+                const ua::UInt16 ns = h.client->namespaceIndex(nsUri, std::chrono::seconds(5));
+                h.subscription = ua::client::Subscription(
+                    *h.client, {.publishingInterval = 1000, .lifetimeCount = 6000});
+                h.item = h.subscription.monitorValue(ua::NodeId(ns, "Scalar.Int32"),
+                                                     [](const ua::DataValue&) {});
+                held.push_back(std::move(h));
+            }
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "load client %d: session %zu: %s\n", id, held.size(), e.what());
+            std::printf("{\"id\":%d,\"error\":\"sessions\",\"sessions\":%zu}\n", id, held.size());
+            return 1;
+        }
+        std::printf("ready %d\n", idleSessions);
+        std::fflush(stdout);
+        std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+        for (auto& h : held) h.client->disconnect();
+        std::printf("{\"id\":%d,\"sessions\":%d}\n", id, idleSessions);
+        return 0;
     }
     std::map<std::uint32_t, std::uint64_t> hist;
     std::uint64_t calls = 0, errors = 0, mismatches = 0;
