@@ -95,17 +95,36 @@ def start_our_server(build, max_sessions=0):
     if not os.access(exe, os.X_OK):
         sys.exit(f"missing {exe}: build with -DPNP_BUILD_BENCH=ON")
     extra = ["--max-sessions", str(max_sessions)] if max_sessions else []
-    p = subprocess.Popen([exe, "--port", "0", "--ticker", "5"] + extra, stdout=subprocess.PIPE,
-                         text=True)
-    deadline = time.monotonic() + 10
-    while time.monotonic() < deadline:
-        line = p.stdout.readline()
-        if line.startswith("listening on "):
-            return p, line.split()[-1]
-        if not line and p.poll() is not None:
-            break
+    return start_server([exe, "--port", "0", "--ticker", "5"] + extra)
+
+
+def read_line(p, prefix, deadline):
+    """The first line of p's stdout (a binary pipe) that starts with prefix, or None at the
+    deadline or EOF. Reads the pipe itself (os.read): nothing hides in a Python buffer."""
+    import select
+    pending = b""
+    while True:
+        while b"\n" in pending:
+            line, pending = pending.split(b"\n", 1)
+            if line.decode(errors="replace").startswith(prefix):
+                return line.decode(errors="replace")
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([p.stdout], [], [], left)[0]:
+            return None
+        chunk = os.read(p.stdout.fileno(), 4096)
+        if not chunk:
+            return None
+        pending += chunk
+
+
+def start_server(argv):
+    """Starts a server that prints "listening on URL"; (process, URL)."""
+    p = subprocess.Popen(argv, stdout=subprocess.PIPE, bufsize=0)
+    line = read_line(p, "listening on ", time.monotonic() + 10)
+    if line:
+        return p, line.split()[-1]
     stop(p)
-    sys.exit("pnp_bench_server did not start")
+    sys.exit(f"{argv[0]} did not start")
 
 
 def free_port():
@@ -116,16 +135,7 @@ def free_port():
 
 
 def start_o6_server(exe):
-    p = subprocess.Popen([exe, str(free_port())], stdout=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 10
-    while time.monotonic() < deadline:
-        line = p.stdout.readline()
-        if line.startswith("listening on "):
-            return p, line.split()[-1]
-        if not line and p.poll() is not None:
-            break
-    stop(p)
-    sys.exit(f"{exe} did not start")
+    return start_server([exe, str(free_port())])
 
 
 def client_argv(args, url, i, start_at):
@@ -197,20 +207,16 @@ def many_sessions(args, url, pid):
         k = min(left, args.per_process)
         holders.append(subprocess.Popen(
             [exe, url, "--idle-sessions", str(k), "--seconds", str(hold), "--id", str(i),
-             "--namespace", args.namespace], stdout=subprocess.PIPE, text=True))
+             "--namespace", args.namespace], stdout=subprocess.PIPE, bufsize=0))
         left -= k
         i += 1
     opened = 0
     try:
         deadline = time.monotonic() + 60 + args.sessions / 20
         for h in holders:
-            while time.monotonic() < deadline:
-                line = h.stdout.readline()
-                if line.startswith("ready "):
-                    opened += int(line.split()[1])
-                    break
-                if not line:
-                    break
+            line = read_line(h, "ready ", deadline)
+            if line:
+                opened += int(line.split()[1])
         t_open = time.monotonic()
         rss1 = proc_rss_kib(pid)
         after = round_(probe_args, url, pid, 1, 3) if opened == args.sessions else None
