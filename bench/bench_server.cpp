@@ -3,7 +3,9 @@
 // benchmark with --server bench (and to tell what the CLI itself adds to start-up and RSS).
 //
 //   pnp_bench_server [--host 127.0.0.1] [--port N] [--ticker MS] [--max-sessions N]
+//                    [--event-loops N]
 //
+// --event-loops N: the transport's I/O threads (default: one per core, at most 4).
 // --max-sessions N: sessions (and connections) allowed at once (default: the server's 100
 // sessions, 1000 connections), for bench/load's many-sessions runs.
 //
@@ -34,6 +36,7 @@ int main(int argc, char** argv) {
     int port = 0;
     int tickerMs = 0;
     long maxSessions = 0;
+    long eventLoops = 0;
     for (int i = 1; i < argc; ++i) {
         std::string a = argv[i];
         if (a == "--host" && i + 1 < argc)
@@ -44,9 +47,12 @@ int main(int argc, char** argv) {
             tickerMs = std::stoi(argv[++i]);
         else if (a == "--max-sessions" && i + 1 < argc)
             maxSessions = std::clamp(std::stol(argv[++i]), 1L, 100000L);
+        else if (a == "--event-loops" && i + 1 < argc)
+            eventLoops = std::clamp(std::stol(argv[++i]), 1L, 64L);
         else {
             std::fprintf(stderr,
-                         "usage: %s [--host ADDR] [--port N] [--ticker MS] [--max-sessions N]\n",
+                         "usage: %s [--host ADDR] [--port N] [--ticker MS] [--max-sessions N] "
+                         "[--event-loops N]\n",
                          argv[0]);
             return 2;
         }
@@ -61,6 +67,7 @@ int main(int argc, char** argv) {
         config.host = host;
         config.publicHost = host;
         config.port = static_cast<UInt16>(port);
+        config.transport.eventLoops = static_cast<std::size_t>(eventLoops);
         if (maxSessions > 0) {
             config.maxSessions = static_cast<UInt32>(maxSessions);
             config.transport.maxConnections = std::max<std::size_t>(

@@ -7,6 +7,9 @@
                                                        open62541's, instead of ours)
       [--open62541 EXE]                                 (open62541's server in the same run:
                                                        bench/load/build_open62541_server.sh)
+      [--event-loops N]                                 (our server's I/O threads)
+      [--baseline EXE]                                  (another pnp_bench_server, e.g. the
+                                                       previous commit's, in the same run)
       [--soak SECONDS [--sample-every 10]]
       [--sessions N [--per-process 250]]
       [--json OUT]
@@ -90,11 +93,13 @@ def percentile(hist, q):
     return max(hist)
 
 
-def start_our_server(build, max_sessions=0):
-    exe = os.path.join(build, "bench", "pnp_bench_server")
+def start_our_server(build, max_sessions=0, exe=None, event_loops=0):
+    exe = exe or os.path.join(build, "bench", "pnp_bench_server")
     if not os.access(exe, os.X_OK):
         sys.exit(f"missing {exe}: build with -DPNP_BUILD_BENCH=ON")
     extra = ["--max-sessions", str(max_sessions)] if max_sessions else []
+    if event_loops:
+        extra += ["--event-loops", str(event_loops)]
     return start_server([exe, "--port", "0", "--ticker", "5"] + extra)
 
 
@@ -250,6 +255,8 @@ def main():
     ap.add_argument("--server-pid", type=int)
     ap.add_argument("--namespace", default="urn:pnp:demo")
     ap.add_argument("--open62541")
+    ap.add_argument("--baseline")
+    ap.add_argument("--event-loops", type=int, default=0)
     ap.add_argument("--soak", type=float)
     ap.add_argument("--sample-every", type=float, default=10)
     ap.add_argument("--sessions", type=int)
@@ -266,13 +273,19 @@ def main():
     if args.sessions is not None and not 1 <= args.sessions <= 100000:
         sys.exit("--sessions: 1 .. 100000")
     if not url:
-        server, url = start_our_server(args.build, (args.sessions or 0) + 100 if args.sessions else 0)
+        server, url = start_our_server(args.build, (args.sessions or 0) + 100 if args.sessions else 0,
+                                       None, args.event_loops)
         pid = server.pid
-    o6 = None
+    o6 = o6_url = None
     if args.open62541:
         if args.soak:
             sys.exit("--open62541 is for the table, not --soak")
         o6, o6_url = start_o6_server(args.open62541)
+    base = base_url = None
+    if args.baseline:
+        if args.soak or args.sessions:
+            sys.exit("--baseline is for the table")
+        base, base_url = start_our_server(args.build, 0, args.baseline)
     results = []
     try:
         print(f"server {url} (pid {pid}), client {args.client}, mix {args.mix}, "
@@ -293,7 +306,7 @@ def main():
                   f"errors {r['errors']}, mismatches {r['mismatches']}, "
                   f"out of sequence {r['outOfOrder']} of {r['notifications']} notifications")
         else:
-            print(("    " if o6 else "") + " clients |   calls/s |  median µs |    p99 µs | server CPU/call µs | RSS MiB "
+            print(("    " if o6 or base else "") + " clients |   calls/s |  median µs |    p99 µs | server CPU/call µs | RSS MiB "
                   "| fds | errors mism. order")
             def row(label, n, r):
                 print(f"{label}{n:7d} | {r['callsPerSecond']:9.0f} | {r['medianUs']:10.0f} | "
@@ -308,20 +321,26 @@ def main():
                 r = round_(args, url, pid, n, args.seconds)
                 r["server"] = "pnp" if server else "given"
                 results.append(r)
-                row("pnp " if o6 else "", n, r)
-                if o6:
-                    q = round_(args, o6_url, o6.pid, n, args.seconds)
-                    q["server"] = "open62541"
+                row("pnp " if o6 or base else "", n, r)
+                for proc, other_url, label, name in ((base, base_url, "base", "baseline"),
+                                                     (o6, o6_url, "o6  ", "open62541")):
+                    if not proc:
+                        continue
+                    q = round_(args, other_url, proc.pid, n, args.seconds)
+                    q["server"] = name
                     results.append(q)
-                    row("o6  ", n, q)
-                    print(f"     ratio pnp/open62541: calls/s {r['callsPerSecond'] / max(1, q['callsPerSecond']):.2f}"
+                    row(label, n, q)
+                    print(f"     ratio pnp/{name}: calls/s {r['callsPerSecond'] / max(1, q['callsPerSecond']):.2f}"
                           f", CPU per call {r['serverCpuPerCallUs'] / q['serverCpuPerCallUs']:.2f}"
+                          f", median {r['medianUs'] / max(1, q['medianUs']):.2f}"
                           f", p99 {r['p99Us'] / max(1, q['p99Us']):.2f}", flush=True)
     finally:
         if server:
             stop(server)
         if o6:
             stop(o6)
+        if base:
+            stop(base)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=1)

@@ -1,8 +1,9 @@
 // The OPC UA server: endpoints, sessions and service dispatch on top of the opc.tcp
 // transport and the address space.
 //
-// Threading: each client connection has a thread of its own; services run on it under the
-// transport's network lock, one at a time across the server (see transport/tcp_server.hpp),
+// Threading: the transport's event loops (one per core) read the connections; services run
+// on them under the transport's network lock, one at a time across the server (see
+// transport/tcp_server.hpp),
 // so services must be quick; long-running work (a method that moves a robot) completes later
 // from any thread through the method's completion callback. Applications change the address
 // space from their own threads through Server::post() or the address space's thread-safe

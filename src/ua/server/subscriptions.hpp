@@ -13,7 +13,7 @@
 // request is answered at once when the publishing interval allows. The engine never calls
 // into the AddressSpace while it holds its mutex (the listener is called with the address
 // space locked, so the order is always address space -> engine). Responses go out with
-// ServerConnection::send(), which is thread-safe; nothing here blocks a connection thread.
+// ServerConnection::send(), which is thread-safe; nothing here blocks an event loop.
 #pragma once
 
 #include <condition_variable>

@@ -1,7 +1,8 @@
 #include "ua/transport/tcp_server.hpp"
 
 #include <fcntl.h>
-#include <poll.h>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/uio.h>
 #include <unistd.h>
@@ -31,9 +32,11 @@ namespace {
 constexpr std::chrono::milliseconds kLinger{2000};
 // Period of the sweep over all connections (hello / idle timeouts, token expiry).
 constexpr std::chrono::milliseconds kHousekeeping{100};
-// A connection thread blocked in recv() / send() wakes at least this often to notice a
-// close or stop requested by another thread and output queued by other threads.
-constexpr std::chrono::milliseconds kConnectionPoll{100};
+// An event loop wakes at least this often to finish lingering connections whose time is up.
+constexpr std::chrono::milliseconds kLoopSweep{100};
+// Events taken from epoll_wait() at once; with many busy clients one wake-up serves up to
+// this many requests under one acquisition of the network lock.
+constexpr int kMaxEvents = 64;
 // Backpressure: while more than this many response bytes wait for the socket, the
 // connection stops reading requests (a client that sends but never reads cannot make the
 // server queue without bound).
@@ -49,16 +52,51 @@ std::string endpointString(const tcp::endpoint& ep) {
     return s + ":" + std::to_string(ep.port());
 }
 
-void setReceiveTimeout(int fd, std::chrono::milliseconds period) {
-    timeval tv{};
-    tv.tv_sec = static_cast<time_t>(period.count() / 1000);
-    tv.tv_usec = static_cast<suseconds_t>((period.count() % 1000) * 1000);
-    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-}
-
 }  // namespace
 
 class TcpServerConnection;
+
+// One I/O thread: an epoll set of connections. Level-triggered: a connection is read once
+// per wake-up (the rest, if any, wakes the loop again), so a request costs epoll_wait(),
+// recv() and the response's sendmsg(); everything the loop read in one wake-up is handed to
+// the protocol under one acquisition of the network lock.
+class EventLoop {
+  public:
+    explicit EventLoop(TcpServer::Impl& server);
+    ~EventLoop();
+    EventLoop(const EventLoop&) = delete;
+    EventLoop& operator=(const EventLoop&) = delete;
+
+    // Any thread. The connection has been started (TcpServerConnection::start()). False when
+    // epoll refuses it (resource limit).
+    bool add(const std::shared_ptr<TcpServerConnection>& c);
+    // Finishes every connection (onConnectionClosed for each) and joins the thread.
+    void stop();
+    std::size_t size() const { return count_.load(std::memory_order_relaxed); }
+    // Any thread: the epoll set's interest in c's socket.
+    void watch(int fd, TcpServerConnection* c, std::uint32_t events) const;
+    // Any thread: a connection's channel closed; the loop starts its linger time.
+    void nudge() const;
+
+  private:
+    void run();
+    void takeAdded();
+    // Finishes the connections that are done; returns how many linger.
+    std::size_t sweep(TimePoint now);
+    void finish(TcpServerConnection* c);
+
+    TcpServer::Impl& server_;
+    int epoll_ = -1;
+    int wake_ = -1;  // eventfd: stop(), nudge()
+    std::thread thread_;
+    std::atomic<bool> stop_{false};
+    std::atomic<std::size_t> count_{0};
+    std::mutex addedMutex_;
+    std::vector<std::shared_ptr<TcpServerConnection>> added_;  // not yet in conns_
+    std::atomic<bool> hasAdded_{false};
+    // The loop thread's only.
+    std::vector<std::shared_ptr<TcpServerConnection>> conns_;
+};
 
 struct TcpServer::Impl {
     Impl(ServerTransportConfig c, ServiceHandler& h) : config(std::move(c)), handler(h) {
@@ -76,8 +114,8 @@ struct TcpServer::Impl {
     void housekeeping();
     void scheduleTick(std::uint64_t generation);
     void removeConnection(const std::shared_ptr<TcpServerConnection>& c, bool notify);
-    void threadStarted();
-    void threadFinished();
+    void startLoops();
+    void stopLoops();
     UInt32 newChannelId() {
         UInt32 id = nextChannelId++;
         if (nextChannelId == 0) nextChannelId = 1;
@@ -88,7 +126,7 @@ struct TcpServer::Impl {
     ServerTransportConfig config;
     ServiceHandler& handler;
     // The service thread: accepts, runs the timers and the functions post()ed to the
-    // network thread. Connections do their own I/O on their own threads.
+    // network thread. Connections do their I/O on the event loops.
     asio::io_context io;
     // Declared before the connections' owners: every channel gives its bytes back first.
     MemoryBudget incompleteMessages{config.maxIncompleteMessageBytes};
@@ -117,10 +155,8 @@ struct TcpServer::Impl {
     std::function<void()> tickFn;
     std::uint64_t tickGeneration = 0;
 
-    // Connection threads still running (stop() waits for 0).
-    std::mutex threadsMutex;
-    std::condition_variable threadsDone;
-    std::size_t liveThreads = 0;
+    // The event loops that do the connections' I/O (started by start(), joined by stop()).
+    std::vector<std::unique_ptr<EventLoop>> loops;
 
     std::atomic<std::size_t> connectionCount{0};
 };
@@ -143,7 +179,7 @@ void runDropping(const std::function<void()>& fn) noexcept {
 bool TcpServer::Impl::holdsNetworkLock() const { return t_networkLockHolder == this; }
 
 // Holds the network lock; on release, writes what the connections queued meanwhile
-// (without blocking: a connection thread finishes what the socket does not take at once).
+// (without blocking: the connection's loop finishes what the socket does not take at once).
 class NetworkLock {
   public:
     explicit NetworkLock(TcpServer::Impl& s) : s_(s), lock_(s.networkMutex) {
@@ -166,10 +202,9 @@ class NetworkLock {
 };
 
 // =======================================================================================
-// One accepted connection and its thread. The thread blocks in recv() (no event loop
-// between the socket and the protocol: a request costs the same two system calls as a
-// plain blocking echo), runs the secure channel and the upper layer under the network
-// lock and writes the responses itself.
+// One accepted connection on its event loop. The loop reads it (onEvents()), runs the
+// secure channel and the upper layer under the network lock (receivedInput()), writes what
+// the socket did not take at once (EPOLLOUT) and finishes it (finish()).
 class TcpServerConnection final : public ServerConnection, private ServerChannel::Hooks {
   public:
     TcpServerConnection(TcpServer::Impl& server, int fd, std::string peer, bool rejected)
@@ -268,56 +303,65 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         noteClosed();
     }
 
-    // Server stop: the thread leaves at once (no linger).
-    void requestStop() {
-        stopRequested_.store(true, std::memory_order_release);
-        if (fd_ >= 0) ::shutdown(fd_, SHUT_RDWR);  // wakes recv() / send()
+    // ---- the event loop's thread -----------------------------------------------------------
+    // Before the connection joins its loop (the service thread, under the network lock).
+    void start(EventLoop* loop) {
+        loop_ = loop;
+        me_ = self();
+        if (rejected_) channel_.fail(status::BadTcpServerTooBusy, "too many connections");
+        noteClosed();
+        space_ = channel_.readSpace();
+    }
+    int fd() const { return fd_; }
+    // Instead of joining a loop (under the network lock): the socket closes with the object.
+    void abandon() {
+        me_.reset();
+        loop_ = nullptr;
+        closedFlag_.store(true, std::memory_order_release);
+        finished_ = true;
     }
 
-    // ---- the connection's thread ----------------------------------------------------------
-    void run() {
-        // request() hands this to the upper layer without a shared_from_this() per request.
-        const std::shared_ptr<ServerConnection> me = self();
-        self_ = &me;
-        setReceiveTimeout(fd_, kConnectionPoll);
-        std::span<Byte> space;
-        {
-            NetworkLock lock(server_);
-            if (rejected_) channel_.fail(status::BadTcpServerTooBusy, "too many connections");
-            noteClosed();
-            space = channel_.readSpace();
+    // What happened on the socket; returns true when input waits for the protocol
+    // (receivedInput(), under the network lock). Outside the network lock.
+    bool onEvents(std::uint32_t events, Byte* sink, std::size_t sinkSize) {
+        if (events & EPOLLOUT) {
+            if (writeQueued() == WriteResult::Error) return false;
+            finIfDone();
         }
-        while (!stopRequested()) {
-            WriteResult w = writeQueued();
-            if (w == WriteResult::Error) break;  // the peer is gone
-            if (closing_.load(std::memory_order_acquire)) {
-                linger();
-                break;
-            }
-            if (w == WriteResult::Stalled) {
-                // The socket takes no more for now: wait for room, and for requests while
-                // the backlog is small (backpressure on a client that does not read).
-                short events = POLLOUT;
-                if (queuedBytes() <= kMaxQueuedOutput) events |= POLLIN;
-                pollfd p{fd_, events, 0};
-                if (::poll(&p, 1, static_cast<int>(kConnectionPoll.count())) <= 0 ||
-                    (p.revents & (POLLIN | POLLERR | POLLHUP)) == 0)
-                    continue;
-            }
-            ssize_t n = ::recv(fd_, space.data(), space.size(), 0);
-            if (n > 0) {
-                NetworkLock lock(server_);
-                applyCloseRequest();
-                channel_.received(static_cast<std::size_t>(n), coarseNow());  // never throws
-                noteClosed();
-                space = channel_.readSpace();
-            } else if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) {
-                // the poll period passed: look at the flags and the queue again
-            } else {
-                break;  // closed or reset, possibly in the middle of a message
-            }
+        if ((events & (EPOLLIN | EPOLLERR | EPOLLHUP)) == 0) return false;
+        if (closing_.load(std::memory_order_acquire)) {
+            // Lingering: read and discard until the peer closes.
+            ssize_t n = ::recv(fd_, sink, sinkSize, 0);
+            if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
+                eof_ = true;
+            return false;
         }
-        finish();
+        ssize_t n = ::recv(fd_, space_.data(), space_.size(), 0);
+        if (n > 0) {
+            received_ = static_cast<std::size_t>(n);
+            return true;
+        }
+        if (n == 0 || (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) eof_ = true;
+        return false;  // closed or reset, possibly in the middle of a message
+    }
+
+    // Under the network lock, after onEvents() returned true.
+    void receivedInput(TimePoint now) {
+        applyCloseRequest();
+        if (!closing_.load(std::memory_order_relaxed))
+            channel_.received(received_, now);  // never throws
+        received_ = 0;
+        noteClosed();
+        space_ = channel_.readSpace();
+    }
+
+    // True when the loop should finish this connection: the peer is gone, the socket broke
+    // or the linger time is over. Sets the linger deadline when the channel has closed.
+    bool done(TimePoint now) {
+        if (eof_ || broken_.load(std::memory_order_acquire)) return true;
+        if (!closing_.load(std::memory_order_acquire)) return false;
+        if (lingerUntil_ == TimePoint{}) lingerUntil_ = now + kLinger;
+        return now >= lingerUntil_;
     }
 
     enum class WriteResult { Drained, Stalled, Error };
@@ -352,7 +396,12 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
                 if (err == EINTR) continue;
                 writing_ = false;
                 writerDone_.notify_all();
-                if (err == EAGAIN || err == EWOULDBLOCK) return WriteResult::Stalled;
+                if (err == EAGAIN || err == EWOULDBLOCK) {
+                    // The loop writes the rest when the socket has room; while the backlog
+                    // is large it reads no requests (backpressure).
+                    watch(EPOLLOUT | (queued_ <= kMaxQueuedOutput ? EPOLLIN : 0u));
+                    return WriteResult::Stalled;
+                }
                 broken_ = true;
                 return WriteResult::Error;
             }
@@ -374,6 +423,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
                 outPending_.store(false, std::memory_order_release);
                 writing_ = false;
                 writerDone_.notify_all();
+                watch(EPOLLIN);
                 return WriteResult::Drained;
             }
         }
@@ -384,7 +434,22 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         return std::static_pointer_cast<TcpServerConnection>(shared_from_this());
     }
 
-    bool stopRequested() const { return stopRequested_.load(std::memory_order_acquire); }
+    // Under outMutex_: the loop's interest in the socket, changed only when it differs.
+    void watch(std::uint32_t events) {
+        if (events == watched_ || broken_ || loop_ == nullptr) return;
+        watched_ = events;
+        loop_->watch(fd_, this, events);
+    }
+
+    // After writing (any thread): once a closed channel's output is all written, FIN at once.
+    void finIfDone() {
+        if (!closing_.load(std::memory_order_acquire)) return;
+        std::lock_guard q(outMutex_);
+        if (!writing_ && !broken_ && !finSent_ && outHead_ == out_.size()) {
+            ::shutdown(fd_, SHUT_WR);
+            finSent_ = true;
+        }
+    }
 
     // close() called without the network lock (under it).
     void applyCloseRequest() {
@@ -400,6 +465,7 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             closedFlag_.store(true, std::memory_order_release);
             closing_.store(true, std::memory_order_release);
             markDirty();  // FIN as soon as the output is written (afterNetworkLock())
+            if (loop_ != nullptr) loop_->nudge();  // the linger time starts
         }
     }
 
@@ -437,8 +503,8 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
         markDirty();
     }
 
-    // Only on the connection's thread, inside run().
-    void request(const IncomingRequest& r) override { server_.handler.onRequest(*self_, r); }
+    // Under the network lock, from receivedInput().
+    void request(const IncomingRequest& r) override { server_.handler.onRequest(me_, r); }
 
     UInt32 newChannelId() override {
         UInt32 id = server_.newChannelId();
@@ -457,47 +523,15 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     // Called by NetworkLock::unlock() for connections in `dirty`.
     void clearDirty() { dirty_ = false; }
     // After the network lock was released (any thread): writes what was queued; once a
-    // closed channel's output is all written, sends FIN at once (the connection's thread,
-    // maybe blocked in recv(), lingers when it next wakes).
+    // closed channel's output is all written, sends FIN at once (the loop lingers).
     void afterNetworkLock() {
-        if (writeQueued() != WriteResult::Drained || !closing_.load(std::memory_order_acquire))
-            return;
-        std::lock_guard q(outMutex_);
-        if (!writing_ && !broken_ && outHead_ == out_.size()) ::shutdown(fd_, SHUT_WR);
+        if (writeQueued() == WriteResult::Drained) finIfDone();
     }
 
   private:
-    std::size_t queuedBytes() {
-        std::lock_guard q(outMutex_);
-        return queued_;
-    }
-
-    // The channel is closed: write what is pending, send FIN, read and discard until the
-    // peer closes (at most kLinger).
-    void linger() {
-        const TimePoint until = Clock::now() + kLinger;
-        auto msLeft = [&] {
-            auto d = std::chrono::duration_cast<std::chrono::milliseconds>(until - Clock::now());
-            return static_cast<int>(
-                std::clamp<std::int64_t>(d.count(), 0, kConnectionPoll.count()));
-        };
-        for (;;) {
-            WriteResult w = writeQueued();
-            if (w == WriteResult::Error || stopRequested() || Clock::now() >= until) return;
-            if (w == WriteResult::Drained && queuedBytes() == 0) break;
-            pollfd p{fd_, POLLOUT, 0};
-            ::poll(&p, 1, msLeft());
-        }
-        ::shutdown(fd_, SHUT_WR);
-        Byte sink[4096];
-        while (!stopRequested() && Clock::now() < until) {
-            ssize_t n = ::recv(fd_, sink, sizeof sink, 0);
-            if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
-                return;
-        }
-    }
-
-    void finish() {
+  public:
+    // On the loop's thread, once: the connection leaves its loop and the server.
+    void finish(int epoll) {
         {
             // No thread writes to fd_ from here on.
             std::unique_lock q(outMutex_);
@@ -518,30 +552,45 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
             frontWritten_ = 0;
             outPending_.store(false, std::memory_order_release);
         }
+        ::epoll_ctl(epoll, EPOLL_CTL_DEL, fd_, nullptr);
         ::close(fd_);
         fd_ = -1;
-        server_.removeConnection(self(), !rejected_);
+        auto me = self();
+        me_.reset();
+        server_.removeConnection(me, !rejected_);
     }
 
+  private:
     TcpServer::Impl& server_;
     int fd_;  // closed (finish()) when no thread writes, under the network lock
     std::string peer_;
-    ServerChannel channel_;  // under the network lock (readSpace: the connection's thread)
+    ServerChannel channel_;  // under the network lock (readSpace: the loop's thread)
     bool rejected_;
     std::atomic<UInt32> channelId_{0};
     std::atomic<bool> closedFlag_{false};      // isClosed()
     std::atomic<std::size_t> postedSends_{0};  // sends queued to the service thread
     std::atomic<bool> closing_{false};         // the channel closed: linger, then finish
-    std::atomic<bool> stopRequested_{false};   // server stop: finish at once
     std::atomic<bool> closeRequested_{false};  // close() from a thread without the lock
     bool finished_ = false;                    // under the network lock
     bool dirty_ = false;                       // in server_.dirty (network lock)
-    const std::shared_ptr<ServerConnection>* self_ = nullptr;  // run()'s, while it runs
+    // Handed to the upper layer with each request (no shared_from_this() per request);
+    // from start() to finish().
+    std::shared_ptr<ServerConnection> me_;
+    EventLoop* loop_ = nullptr;  // set by start()
+
+    // The loop's thread only.
+    std::span<Byte> space_;     // where the next recv() goes (channel_.readSpace())
+    std::size_t received_ = 0;  // bytes in space_ for receivedInput()
+    bool eof_ = false;          // the peer closed or the socket failed
+    TimePoint lingerUntil_{};   // set when the loop first sees the channel closed
 
     std::mutex outMutex_;  // guards the output state below
     std::condition_variable writerDone_;
     bool writing_ = false;  // a thread is writing (outside outMutex_, during sendmsg)
-    bool broken_ = false;   // socket error or finished: nobody writes any more
+    // Socket error or finished: nobody writes any more (read by the loop without outMutex_).
+    std::atomic<bool> broken_{false};
+    bool finSent_ = false;             // shutdown(SHUT_WR) done
+    std::uint32_t watched_ = EPOLLIN;  // the epoll interest (EventLoop::add's)
     // out_ has unwritten bytes (set and cleared under outMutex_; read without it so that
     // an idle check costs no lock).
     std::atomic<bool> outPending_{false};
@@ -616,17 +665,15 @@ void TcpServer::Impl::onAccepted(const asio::error_code& ec, tcp::socket socket)
     }
     int fd = socket.release(ignored);
     if (fd < 0) return;
-    ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);  // the thread blocks in recv()
+    ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) | O_NONBLOCK);  // the loop never blocks on it
+    // The loop with the fewest connections.
+    EventLoop* loop = loops.front().get();
+    for (auto& l : loops)
+        if (l->size() < loop->size()) loop = l.get();
     auto c = std::make_shared<TcpServerConnection>(*this, fd, std::move(peer), reject);
-    threadStarted();
-    try {
-        std::thread([c, this]() mutable {
-            c->run();
-            c.reset();  // before threadFinished(): stop() may destroy the server then
-            threadFinished();
-        }).detach();
-    } catch (const std::system_error&) {
-        threadFinished();  // no thread (resource limit): the connection is dropped
+    c->start(loop);
+    if (!loop->add(c)) {
+        c->abandon();  // epoll refused it (resource limit): the connection is dropped
         return;
     }
     connections.insert(c);
@@ -637,14 +684,158 @@ void TcpServer::Impl::onAccepted(const asio::error_code& ec, tcp::socket socket)
     connectionCount.store(activeConnections, std::memory_order_relaxed);
 }
 
-void TcpServer::Impl::threadStarted() {
-    std::lock_guard l(threadsMutex);
-    ++liveThreads;
+// =======================================================================================
+EventLoop::EventLoop(TcpServer::Impl& server) : server_(server) {
+    epoll_ = ::epoll_create1(EPOLL_CLOEXEC);
+    wake_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+    if (epoll_ < 0 || wake_ < 0) {
+        if (epoll_ >= 0) ::close(epoll_);
+        if (wake_ >= 0) ::close(wake_);
+        throw TransportError(status::BadResourceUnavailable, "cannot create an event loop");
+    }
+    epoll_event ev{};
+    ev.events = EPOLLIN;
+    ev.data.ptr = nullptr;  // the wake-up
+    ::epoll_ctl(epoll_, EPOLL_CTL_ADD, wake_, &ev);
+    thread_ = std::thread([this] { run(); });
 }
 
-void TcpServer::Impl::threadFinished() {
-    std::lock_guard l(threadsMutex);
-    if (--liveThreads == 0) threadsDone.notify_all();
+EventLoop::~EventLoop() {
+    stop();
+    ::close(epoll_);
+    ::close(wake_);
+}
+
+bool EventLoop::add(const std::shared_ptr<TcpServerConnection>& c) {
+    {
+        // Before the socket is watched: its first event finds it in added_.
+        std::lock_guard l(addedMutex_);
+        added_.push_back(c);
+        hasAdded_.store(true, std::memory_order_release);
+    }
+    epoll_event ev{};
+    ev.events = EPOLLIN;
+    ev.data.ptr = c.get();
+    if (::epoll_ctl(epoll_, EPOLL_CTL_ADD, c->fd(), &ev) != 0) {
+        std::lock_guard l(addedMutex_);
+        added_.erase(std::find(added_.begin(), added_.end(), c));
+        return false;
+    }
+    count_.fetch_add(1, std::memory_order_relaxed);
+    return true;
+}
+
+void EventLoop::watch(int fd, TcpServerConnection* c, std::uint32_t events) const {
+    epoll_event ev{};
+    ev.events = events;
+    ev.data.ptr = c;
+    ::epoll_ctl(epoll_, EPOLL_CTL_MOD, fd, &ev);
+}
+
+void EventLoop::nudge() const {
+    std::uint64_t one = 1;
+    [[maybe_unused]] auto n = ::write(wake_, &one, sizeof one);
+}
+
+void EventLoop::stop() {
+    if (!thread_.joinable()) return;
+    stop_.store(true, std::memory_order_release);
+    nudge();
+    thread_.join();
+}
+
+void EventLoop::takeAdded() {
+    if (!hasAdded_.load(std::memory_order_acquire)) return;
+    std::lock_guard l(addedMutex_);
+    for (auto& c : added_) conns_.push_back(std::move(c));
+    added_.clear();
+    hasAdded_.store(false, std::memory_order_relaxed);
+}
+
+void EventLoop::finish(TcpServerConnection* c) {
+    auto it =
+        std::find_if(conns_.begin(), conns_.end(), [c](const auto& p) { return p.get() == c; });
+    if (it == conns_.end()) return;  // finished already
+    std::shared_ptr<TcpServerConnection> keep = std::move(*it);
+    *it = std::move(conns_.back());
+    conns_.pop_back();
+    count_.fetch_sub(1, std::memory_order_relaxed);
+    keep->finish(epoll_);
+}
+
+std::size_t EventLoop::sweep(TimePoint now) {
+    std::size_t lingering = 0;
+    for (std::size_t k = 0; k < conns_.size();) {
+        if (conns_[k]->done(now)) {
+            finish(conns_[k].get());  // conns_[k] is now another connection
+        } else {
+            lingering += conns_[k]->isClosed() ? 1 : 0;
+            ++k;
+        }
+    }
+    return lingering;
+}
+
+void EventLoop::run() {
+    epoll_event events[kMaxEvents];
+    TcpServerConnection* ready[kMaxEvents];
+    TcpServerConnection* ended[kMaxEvents];
+    Byte sink[4096];  // what lingering connections read is discarded here
+    TimePoint nextSweep = Clock::now() + kLoopSweep;
+    // Connections whose channel closed and that wait for their peer to close. Without them
+    // the loop sleeps without a timeout: no timer is armed per wait (that costs a request
+    // on a VM as much as a system call).
+    std::size_t lingering = 0;
+    while (!stop_.load(std::memory_order_acquire)) {
+        int n = ::epoll_wait(epoll_, events, kMaxEvents,
+                             lingering > 0 ? static_cast<int>(kLoopSweep.count()) : -1);
+        if (stop_.load(std::memory_order_acquire)) break;
+        takeAdded();
+        std::size_t nReady = 0, nEnded = 0;
+        for (int k = 0; k < n; ++k) {
+            auto* c = static_cast<TcpServerConnection*>(events[k].data.ptr);
+            if (c == nullptr) {  // nudge(): sweep now
+                std::uint64_t count;
+                [[maybe_unused]] auto r = ::read(wake_, &count, sizeof count);
+                nextSweep = TimePoint{};
+                continue;
+            }
+            if (c->onEvents(events[k].events, sink, sizeof sink))
+                ready[nReady++] = c;
+            else if (c->done(coarseNow()))
+                ended[nEnded++] = c;
+        }
+        if (nReady > 0) {
+            // Everything read in this wake-up, under one acquisition of the network lock; the
+            // responses are written when it is released.
+            const TimePoint now = coarseNow();
+            NetworkLock lock(server_);
+            for (std::size_t k = 0; k < nReady; ++k) ready[k]->receivedInput(now);
+        }
+        for (std::size_t k = 0; k < nEnded; ++k) finish(ended[k]);
+        if (lingering > 0 || nextSweep == TimePoint{}) {
+            const TimePoint now = Clock::now();
+            if (now >= nextSweep) {
+                lingering = sweep(now);
+                nextSweep = now + kLoopSweep;
+            }
+        }
+    }
+    // Server stop: every connection ends at once (no linger).
+    takeAdded();
+    while (!conns_.empty()) finish(conns_.back().get());
+}
+
+void TcpServer::Impl::startLoops() {
+    std::size_t n = config.eventLoops;
+    if (n == 0) n = std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 4);
+    for (std::size_t k = 0; k < n; ++k) loops.push_back(std::make_unique<EventLoop>(*this));
+}
+
+// Every connection ends (onConnectionClosed for each); not under the network lock.
+void TcpServer::Impl::stopLoops() {
+    for (auto& l : loops) l->stop();
+    loops.clear();
 }
 
 // Under the network lock.
@@ -727,6 +918,14 @@ void TcpServer::start() {
         std::lock_guard l(i.networkMutex);
         i.stopping = false;
     }
+    try {
+        i.startLoops();
+    } catch (...) {
+        asio::error_code ignored;
+        i.acceptor.close(ignored);
+        i.stopLoops();
+        throw;
+    }
     i.io.restart();
     i.work.emplace(asio::make_work_guard(i.io));
     i.accept();
@@ -759,12 +958,8 @@ void TcpServer::stop() {
         NetworkLock lock(i);
         i.stopping = true;
         ++i.tickGeneration;
-        for (auto& c : i.connections) c->requestStop();
     }
-    {
-        std::unique_lock l(i.threadsMutex);
-        i.threadsDone.wait(l, [&i] { return i.liveThreads == 0; });
-    }
+    i.stopLoops();
     // 3. The service thread. Handlers still queued (sends posted by other threads) are
     // destroyed with the io_context; nothing of them needs to run.
     i.work.reset();

@@ -2,9 +2,11 @@
 // channel (OpenSecureChannel issue / renew, CloseSecureChannel) by itself and hands every
 // MSG request to a ServiceHandler.
 //
-// Threading: every accepted connection has a thread of its own that blocks in recv() and
-// writes its responses itself: no event loop between the socket and the protocol, so a
-// request costs the system calls of a plain blocking echo server. A service thread (asio)
+// Threading: connections are spread over a few event loops (ServerTransportConfig::
+// eventLoops, one per core by default), each a thread with an epoll set: it reads what its
+// ready connections received and hands all of it to the protocol under one acquisition of
+// the network lock, so with many busy clients one wake-up serves many requests and the
+// cost per request does not grow with the number of clients. A service thread (asio)
 // accepts and runs the timers and post()ed functions. Protocol and upper layer are
 // serialised by one lock, the network lock: every callback (ServiceHandler, post(),
 // setTick()) runs while its thread holds it, and "the network thread" below means "the
@@ -12,6 +14,8 @@
 // may be called from any thread; under the network lock they act immediately. Elsewhere
 // send() writes at once when the lock is free (a try-lock, never a wait) and nothing of the
 // connection is queued; otherwise, and for close(), they are posted to the service thread.
+// Responses are written without blocking by the thread that releases the lock; what the
+// socket does not take is written by the connection's loop when the socket has room.
 //
 // Usage:
 //   class Handler : public ServiceHandler {
@@ -34,10 +38,11 @@
 // message and close that connection only. The connection then lingers briefly (reads and
 // discards until the peer closes, at most 2 s) so that the ERR is not lost in a TCP reset.
 //
-// Memory per connection: its thread, the receive buffer (receiveBufferSize + 16 KiB,
-// allocated once), one message being reassembled (at most maxMessageSize) and the responses
-// waiting for the socket. While more than 4 MiB of responses wait (a client that sends but
-// does not read), the connection stops reading requests until the backlog drains.
+// Memory per connection: the receive buffer (receiveBufferSize + 16 KiB, allocated once,
+// its pages touched only as far as messages fill it), one message being reassembled (at
+// most maxMessageSize) and the responses waiting for the socket. While more than 4 MiB of
+// responses wait (a client that sends but does not read), the connection stops reading
+// requests until the backlog drains.
 #pragma once
 
 #include <chrono>
@@ -125,7 +130,7 @@ class TcpServer {
     // TransportError(BadCommunicationError) when the address cannot be bound.
     void start();
     // Closes the listener and every connection (onConnectionClosed for each, on the network
-    // thread) and joins the connection threads and the service thread. Idempotent. Must not
+    // thread) and joins the event loops and the service thread. Idempotent. Must not
     // be called under the network lock (from a callback).
     void stop();
     bool running() const;
@@ -153,6 +158,7 @@ class TcpServer {
   private:
     friend class TcpServerConnection;
     friend class NetworkLock;
+    friend class EventLoop;
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

@@ -206,6 +206,25 @@ class TcpTest : public ::testing::Test {
         EXPECT_EQ(r.typeId, kEchoReply);
         EXPECT_EQ(r.body, body);
     }
+    // Runs `clients` threads at once, each with a connection of its own: perClient(k, c)
+    // returns how many responses were wrong. The sum; 1000 for each client that threw.
+    template <class F>
+    int runClients(int clients, F&& perClient) {
+        std::atomic<int> wrong{0};
+        std::vector<std::thread> threads;
+        for (int k = 0; k < clients; ++k) {
+            threads.emplace_back([&, k] {
+                try {
+                    auto c = connect();
+                    wrong.fetch_add(perClient(k, *c));
+                } catch (const std::exception&) {
+                    wrong.fetch_add(1000);
+                }
+            });
+        }
+        for (auto& t : threads) t.join();
+        return wrong.load();
+    }
     // Waits (bounded) until cond holds.
     template <class F>
     static bool eventually(F&& cond, std::chrono::milliseconds limit = 5000ms) {
@@ -266,33 +285,75 @@ TEST_F(TcpTest, PipelinedRequests) {
     }
 }
 
-// Every connection has its own thread; the handler still sees one request at a time, and
-// every client gets exactly its own responses.
+// Connections are read by several event loops; the handler still sees one request at a
+// time, and every client gets exactly its own responses.
 TEST_F(TcpTest, ConcurrentClientsAreServedOneHandlerAtATime) {
     start();
     constexpr int kClients = 6;
     constexpr int kRequests = 300;
-    std::atomic<int> wrong{0};
-    std::vector<std::thread> clients;
-    for (int k = 0; k < kClients; ++k) {
-        clients.emplace_back([&, k] {
-            try {
-                auto c = connect();
-                for (int i = 0; i < kRequests; ++i) {
-                    Buffer body = pattern(16 + static_cast<std::size_t>(i % 200),
-                                          static_cast<unsigned>(k * 1000 + i));
-                    if (!(roundTrip(*c, body).body == body)) wrong.fetch_add(1);
-                }
-            } catch (const std::exception&) {
-                wrong.fetch_add(1000);
-            }
-        });
-    }
-    for (auto& t : clients) t.join();
-    EXPECT_EQ(wrong.load(), 0);
+    EXPECT_EQ(runClients(kClients,
+                         [](int k, ClientConnection& c) {
+                             int wrong = 0;
+                             for (int i = 0; i < kRequests; ++i) {
+                                 Buffer body = pattern(16 + static_cast<std::size_t>(i % 200),
+                                                       static_cast<unsigned>(k * 1000 + i));
+                                 if (!(roundTrip(c, body).body == body)) ++wrong;
+                             }
+                             return wrong;
+                         }),
+              0);
     EXPECT_EQ(handler.overlaps.load(), 0);
     EXPECT_GE(handler.requests.load(), kClients * kRequests);
     expectObserverWorks();
+}
+
+// All connections on one event loop, next to a client that sends but never reads: every
+// client gets exactly its own responses, in the order of its requests, and the stalled one
+// holds up nobody.
+TEST_F(TcpTest, OneEventLoopServesManyPipeliningClientsInOrder) {
+    scfg.eventLoops = 1;
+    start();
+    RawClient stalled(server->port());
+    ASSERT_TRUE(stalled.open());
+    Buffer big = pattern(8000);
+    UInt32 seq = 2;
+    for (int i = 0; i < 2000; ++i, ++seq) {  // until the server stops reading it
+        if (!stalled.sock.trySend(stalled.msg(seq, seq, big), 100ms)) break;
+    }
+    constexpr int kClients = 32;
+    constexpr int kRounds = 10;
+    constexpr int kPipelined = 20;
+    auto body = [](int k, int round, int i) {
+        return pattern(10 + static_cast<std::size_t>(i),
+                       static_cast<unsigned>(k * 10000 + round * 100 + i));
+    };
+    EXPECT_EQ(
+        runClients(kClients,
+                   [&](int k, ClientConnection& c) {
+                       int wrong = 0;
+                       for (int round = 0; round < kRounds; ++round) {
+                           std::vector<UInt32> ids;
+                           for (int i = 0; i < kPipelined; ++i)
+                               ids.push_back(c.send(requestMessage(kEcho, body(k, round, i))));
+                           auto deadline = Clock::now() + 20s;
+                           for (int i = 0; i < kPipelined; ++i) {
+                               auto r = c.receive(deadline);
+                               if (!r || r->requestId != ids[static_cast<std::size_t>(i)] ||
+                                   !(r->body == body(k, round, i)))
+                                   ++wrong;
+                           }
+                       }
+                       return wrong;
+                   }),
+        0);
+    EXPECT_EQ(handler.overlaps.load(), 0);
+    // The observer and the stalled client remain.
+    EXPECT_TRUE(eventually([&] { return server->connectionCount() == 2u; }));
+    expectObserverWorks();
+    // The stalled client's connection still works: its first response is a MSG, not an ERR.
+    auto first = stalled.sock.readChunk();
+    ASSERT_TRUE(first);
+    EXPECT_EQ(decodeMessageHeader(first->data()).type, MessageType::Message);
 }
 
 TEST_F(TcpTest, ResponseFromWorkerThread) {
