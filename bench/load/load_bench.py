@@ -143,8 +143,8 @@ def start_o6_server(exe):
     return start_server([exe, str(free_port())])
 
 
-def client_argv(args, url, i, start_at):
-    common = ["--mix", args.mix, "--seconds", str(args.seconds), "--payload",
+def client_argv(args, url, i, start_at, seconds):
+    common = ["--mix", args.mix, "--seconds", str(seconds), "--payload",
               str(args.payload), "--id", str(i), "--namespace", args.namespace,
               "--start-at", str(start_at)]
     if args.client == "node":
@@ -155,7 +155,7 @@ def client_argv(args, url, i, start_at):
 def round_(args, url, server_pid, clients, seconds, sample_every=None):
     start_at = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + int(
         (1.0 + 0.05 * clients) * 1e9) + (3_000_000_000 if args.client == "node" else 0)
-    procs = [subprocess.Popen(client_argv(args, url, i, start_at), stdout=subprocess.PIPE,
+    procs = [subprocess.Popen(client_argv(args, url, i, start_at, seconds), stdout=subprocess.PIPE,
                               text=True) for i in range(clients)]
     # CPU from the common start to the end of the last client.
     while time.clock_gettime_ns(time.CLOCK_MONOTONIC) < start_at:
