@@ -444,17 +444,19 @@ void Shared::startAll() {
     // The operator of the node-opcua server trusts our client: the certificate goes to
     // trusted/, the copy in rejected/ goes (a certificate in both counts as rejected).
     // node-opcua files a refused certificate in the background and watches its folders, so
-    // the copy is removed again until the server accepts our client (bounded: 15 s).
+    // the copy is removed again until the server accepts our client (bounded: 30 s).
     copyInto(clientCert, nodeServerPki / "trusted" / "certs", "pnp-client.der");
-    const auto end = std::chrono::steady_clock::now() + 15s;
+    const auto end = std::chrono::steady_clock::now() + 30s;
     RunResult probe;
+    // A probe right after the removal can come before the server has seen it; refused again,
+    // the certificate is filed again: each probe waits a little after the removal.
     do {
         std::error_code ec;
         for (const auto& e : fs::directory_iterator(nodeServerPki / "rejected", ec))
             fs::remove(e.path(), ec);
+        std::this_thread::sleep_for(500ms);
         probe = pnp({"ua", "read", nodeServerUrl, "i=2259", "--pki", pnpClientPki.string()});
         if (probe.exitCode == 0) break;
-        std::this_thread::sleep_for(300ms);
     } while (std::chrono::steady_clock::now() < end);
     if (probe.exitCode != 0)
         pnpClientSetup +=
