@@ -578,6 +578,11 @@ class TcpServerConnection final : public ServerConnection, private ServerChannel
     std::shared_ptr<ServerConnection> me_;
     EventLoop* loop_ = nullptr;  // set by start()
 
+  public:
+    // Where this connection is in its loop's list (the loop's thread only).
+    std::size_t loopIndex = 0;
+
+  private:
     // The loop's thread only.
     std::span<Byte> space_;     // where the next recv() goes (channel_.readSpace())
     std::size_t received_ = 0;  // bytes in space_ for receivedInput()
@@ -747,17 +752,23 @@ void EventLoop::stop() {
 void EventLoop::takeAdded() {
     if (!hasAdded_.load(std::memory_order_acquire)) return;
     std::lock_guard l(addedMutex_);
-    for (auto& c : added_) conns_.push_back(std::move(c));
+    for (auto& c : added_) {
+        c->loopIndex = conns_.size();
+        conns_.push_back(std::move(c));
+    }
     added_.clear();
     hasAdded_.store(false, std::memory_order_relaxed);
 }
 
+// O(1): the last connection takes c's place.
 void EventLoop::finish(TcpServerConnection* c) {
-    auto it =
-        std::find_if(conns_.begin(), conns_.end(), [c](const auto& p) { return p.get() == c; });
-    if (it == conns_.end()) return;  // finished already
-    std::shared_ptr<TcpServerConnection> keep = std::move(*it);
-    *it = std::move(conns_.back());
+    const std::size_t k = c->loopIndex;
+    if (k >= conns_.size() || conns_[k].get() != c) return;  // finished already
+    std::shared_ptr<TcpServerConnection> keep = std::move(conns_[k]);
+    if (k + 1 != conns_.size()) {
+        conns_[k] = std::move(conns_.back());
+        conns_[k]->loopIndex = k;
+    }
     conns_.pop_back();
     count_.fetch_sub(1, std::memory_order_relaxed);
     keep->finish(epoll_);
