@@ -81,7 +81,9 @@ int main(int argc, char** argv) {
         "device robotiq|ecbpi|wsg|kelvin-adc --help` and `pnp component toolchanger --help` "
         "for its tools (README \"Tools that plug in\"), `pnp cell run --help` for the main job, "
         "`pnp mes --help` and `pnp component pick-place --help` for the process and its skills "
-        "(docs/kb-vocabulary.md).");
+        "(docs/kb-vocabulary.md), `pnp dashboard --help` to watch the cell (docs/dashboard.md), "
+        "`pnp pki --help` and `pnp user --help` for certificates, trust and users "
+        "(docs/security.md).");
 
     std::uint16_t ldsPort = 4840;
     std::string ldsHost = "0.0.0.0";
