@@ -619,9 +619,15 @@ class Server::AuthWorker {
             std::lock_guard lock(mutex_);
             if (stop_ || queue_.size() >= kMaxQueued) return false;
             queue_.push_back(std::move(task));
+            ++unfinished_;
         }
         cv_.notify_one();
         return true;
+    }
+    // No check queued or running (their answers are post()ed by then).
+    bool idle() {
+        std::lock_guard lock(mutex_);
+        return unfinished_ == 0;
     }
 
   private:
@@ -636,14 +642,28 @@ class Server::AuthWorker {
                 queue_.pop_front();
             }
             task();
+            std::lock_guard lock(mutex_);
+            --unfinished_;
         }
     }
     std::mutex mutex_;
     std::condition_variable cv_;
     std::deque<std::function<void()>> queue_;
+    std::size_t unfinished_ = 0;
     bool stop_ = false;
     std::thread thread_;
 };
+
+bool Server::runPostedWork(std::chrono::steady_clock::time_point deadline) {
+    if (transport_->running()) return false;
+    for (;;) {
+        const bool idle = !authWorker_ || authWorker_->idle();
+        const std::size_t ran = transport_->runPosted();
+        if (idle && ran == 0) return true;
+        if (std::chrono::steady_clock::now() >= deadline) return false;
+        if (ran == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+}
 
 Server::Session* Server::checkActivation(Ctx& ctx, const ActivateSessionRequest& req,
                                          ActivateSessionResponse& resp,

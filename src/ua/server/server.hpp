@@ -117,6 +117,10 @@ class Server : public transport::ServiceHandler {
     // Runs fn on the network thread, i.e. under the network lock (immediately if called
     // under it).
     void post(std::function<void()> fn);
+    // Only while not started (a server driven by calling its ServiceHandler directly: tests,
+    // fuzzing): waits, at most until `deadline`, for the password checks under way and runs
+    // what they and others post()ed, on this thread. False if work was still pending.
+    bool runPostedWork(std::chrono::steady_clock::time_point deadline);
     // In a service or method handler (the network thread): runs fn on this thread once it has
     // left the network lock and written the responses queued so far, e.g. to wake a worker
     // that would otherwise compete with the response for the CPU. Elsewhere: at once.

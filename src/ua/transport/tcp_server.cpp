@@ -1001,6 +1001,13 @@ void TcpServer::post(std::function<void()> fn) {
     });
 }
 
+std::size_t TcpServer::runPosted() {
+    auto& i = *impl_;
+    if (i.running.load()) return 0;
+    i.io.restart();
+    return i.io.poll();
+}
+
 bool TcpServer::isNetworkThread() const { return impl_->holdsNetworkLock(); }
 
 void TcpServer::afterResponsesWritten(std::function<void()> fn) {

@@ -141,6 +141,10 @@ class TcpServer {
     // Runs fn on the service thread under the network lock (also when called under it:
     // queued, not run inline). Exceptions escaping fn are dropped.
     void post(std::function<void()> fn);
+    // Only while not started (a server driven by calling its handler directly: tests,
+    // fuzzing): runs the functions post()ed so far on this thread, under the network lock,
+    // and returns how many ran. Returns 0 at once while running.
+    std::size_t runPosted();
     // True while this thread holds the network lock (inside every callback).
     bool isNetworkThread() const;
     // On the network thread: runs fn on this thread once it has released the network lock
