@@ -12,6 +12,8 @@
                                                        previous commit's, in the same run)
       [--soak SECONDS [--sample-every 10]]
       [--sessions N [--per-process 250]]
+      [--repeat N]                                      (N repetitions, rotated order,
+                                                       median ratios at the end)
       [--json OUT]
 
 Per client count, one round: the server (ours: pnp_bench_server --ticker 5, started here;
@@ -38,6 +40,7 @@ Loopback only. Not a test: nothing here runs in CI.
 """
 import argparse
 import json
+import statistics
 import os
 import signal
 import subprocess
@@ -261,8 +264,11 @@ def main():
     ap.add_argument("--sample-every", type=float, default=10)
     ap.add_argument("--sessions", type=int)
     ap.add_argument("--per-process", type=int, default=250)
+    ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--json")
     args = ap.parse_args()
+    if not 1 <= args.repeat <= 100:
+        sys.exit("--repeat: 1 .. 100")
     counts = [int(c) for c in args.clients.split(",") if c]
     if not counts or min(counts) < 1 or max(counts) > 2000:
         sys.exit("--clients: counts between 1 and 2000")
@@ -317,23 +323,44 @@ def main():
                       + (f"  ({r['failedClients']} clients failed)" if r["failedClients"] else ""),
                       flush=True)
 
-            for n in counts:
-                r = round_(args, url, pid, n, args.seconds)
-                r["server"] = "pnp" if server else "given"
-                results.append(r)
-                row("pnp " if o6 or base else "", n, r)
-                for proc, other_url, label, name in ((base, base_url, "base", "baseline"),
-                                                     (o6, o6_url, "o6  ", "open62541")):
-                    if not proc:
-                        continue
-                    q = round_(args, other_url, proc.pid, n, args.seconds)
-                    q["server"] = name
-                    results.append(q)
-                    row(label, n, q)
-                    print(f"     ratio pnp/{name}: calls/s {r['callsPerSecond'] / max(1, q['callsPerSecond']):.2f}"
-                          f", CPU per call {r['serverCpuPerCallUs'] / q['serverCpuPerCallUs']:.2f}"
-                          f", median {r['medianUs'] / max(1, q['medianUs']):.2f}"
-                          f", p99 {r['p99Us'] / max(1, q['p99Us']):.2f}", flush=True)
+            # Each repetition runs the servers in a rotated order (no server always first
+            # after a pause); the ratios' medians over the repetitions are printed at the end.
+            servers = [("pnp ", "pnp", url, pid)]
+            if base:
+                servers.append(("base", "baseline", base_url, base.pid))
+            if o6:
+                servers.append(("o6  ", "open62541", o6_url, o6.pid))
+            ratios = {}  # (clients, other) -> [(calls/s, CPU per call, median, p99)]
+            for rep in range(args.repeat):
+                if args.repeat > 1:
+                    print(f"-- repetition {rep + 1} of {args.repeat}", flush=True)
+                for n in counts:
+                    k = rep % len(servers)
+                    got = {}
+                    for label, name, u, p in servers[k:] + servers[:k]:
+                        q = round_(args, u, p, n, args.seconds)
+                        q["server"] = name if name != "pnp" or server else "given"
+                        q["repetition"] = rep
+                        results.append(q)
+                        row(label if len(servers) > 1 else "", n, q)
+                        got[name] = q
+                    r = got["pnp"]
+                    for _, name, _, _ in servers[1:]:
+                        q = got[name]
+                        x = (r["callsPerSecond"] / max(1, q["callsPerSecond"]),
+                             r["serverCpuPerCallUs"] / q["serverCpuPerCallUs"],
+                             r["medianUs"] / max(1, q["medianUs"]), r["p99Us"] / max(1, q["p99Us"]))
+                        ratios.setdefault((n, name), []).append(x)
+                        print(f"     ratio pnp/{name}: calls/s {x[0]:.2f}, CPU per call {x[1]:.2f}"
+                              f", median {x[2]:.2f}, p99 {x[3]:.2f}", flush=True)
+            if args.repeat > 1 and ratios:
+                print(f"medians over {args.repeat} repetitions:")
+                for (n, name), xs in ratios.items():
+                    med = [statistics.median(x[i] for x in xs) for i in range(4)]
+                    print(f"  {n:4d} clients, pnp/{name}: calls/s {med[0]:.2f} "
+                          f"(min {min(x[0] for x in xs):.2f}, max {max(x[0] for x in xs):.2f})"
+                          f", CPU per call {med[1]:.2f}, median {med[2]:.2f}, p99 {med[3]:.2f}",
+                          flush=True)
     finally:
         if server:
             stop(server)

@@ -123,8 +123,9 @@ struct ServerTransportConfig : TransportLimits {
     // Connections beyond this are refused with an ERR BadTcpServerTooBusy. Worst-case
     // memory is about maxConnections * (maxMessageSize + receiveBufferSize + 4 MiB).
     std::size_t maxConnections = 1000;
-    // Threads doing the connections' I/O (epoll loops; connections spread over them).
-    // 0: one per core, at most 4.
+    // Threads doing the connections' I/O (epoll loops; a new connection goes to the loop
+    // with the fewest). 0: one per core (at most 4), and up to one more per core, started
+    // once every loop serves 8 connections.
     std::size_t eventLoops = 0;
     // All connections together hold at most this many bytes of partially received
     // (multi-chunk) messages; a chunk beyond it ends its connection with ERR

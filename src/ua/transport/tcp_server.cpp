@@ -115,6 +115,15 @@ struct TcpServer::Impl {
     void scheduleTick(std::uint64_t generation);
     void removeConnection(const std::shared_ptr<TcpServerConnection>& c, bool notify);
     void startLoops();
+    // The automatic loop count (eventLoops 0): one per core, and up to one more per core,
+    // started once every loop serves kConnectionsPerLoop connections. On a machine that the
+    // server shares with busy processes (its clients on loopback, the cell's other servers)
+    // a loop waits for a CPU like any thread; more loops under many connections keep the
+    // server's share (measured: bench/README.md, "Load").
+    static constexpr std::size_t kConnectionsPerLoop = 8;
+    std::size_t loopsWanted(std::size_t connections) const;
+    std::size_t baseLoops = 1;
+    std::size_t maxLoops = 1;
     void stopLoops();
     UInt32 newChannelId() {
         UInt32 id = nextChannelId++;
@@ -155,7 +164,8 @@ struct TcpServer::Impl {
     std::function<void()> tickFn;
     std::uint64_t tickGeneration = 0;
 
-    // The event loops that do the connections' I/O (started by start(), joined by stop()).
+    // The event loops that do the connections' I/O: baseLoops started by start(), more
+    // (up to maxLoops) by onAccepted() under the network lock; all joined by stop().
     std::vector<std::unique_ptr<EventLoop>> loops;
 
     std::atomic<std::size_t> connectionCount{0};
@@ -671,7 +681,15 @@ void TcpServer::Impl::onAccepted(const asio::error_code& ec, tcp::socket socket)
     int fd = socket.release(ignored);
     if (fd < 0) return;
     ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) | O_NONBLOCK);  // the loop never blocks on it
-    // The loop with the fewest connections.
+    // Another loop when every loop serves kConnectionsPerLoop (up to maxLoops; without a
+    // thread for it, the loops there are serve), then the loop with the fewest connections.
+    while (loops.size() < loopsWanted(activeConnections + 1)) {
+        try {
+            loops.push_back(std::make_unique<EventLoop>(*this));
+        } catch (const std::exception&) {
+            break;
+        }
+    }
     EventLoop* loop = loops.front().get();
     for (auto& l : loops)
         if (l->size() < loop->size()) loop = l.get();
@@ -838,9 +856,18 @@ void EventLoop::run() {
 }
 
 void TcpServer::Impl::startLoops() {
-    std::size_t n = config.eventLoops;
-    if (n == 0) n = std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 4);
-    for (std::size_t k = 0; k < n; ++k) loops.push_back(std::make_unique<EventLoop>(*this));
+    baseLoops = config.eventLoops;
+    maxLoops = config.eventLoops;
+    if (baseLoops == 0) {
+        baseLoops = std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 4);
+        maxLoops = 2 * baseLoops;
+    }
+    for (std::size_t k = 0; k < baseLoops; ++k) loops.push_back(std::make_unique<EventLoop>(*this));
+}
+
+std::size_t TcpServer::Impl::loopsWanted(std::size_t connections) const {
+    const std::size_t wanted = (connections + kConnectionsPerLoop - 1) / kConnectionsPerLoop;
+    return std::clamp(wanted, baseLoops, maxLoops);
 }
 
 // Every connection ends (onConnectionClosed for each); not under the network lock.

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <cerrno>
 #include <cstdio>
+#include <filesystem>
 #include <future>
 #include <mutex>
 #include <random>
@@ -354,6 +355,36 @@ TEST_F(TcpTest, OneEventLoopServesManyPipeliningClientsInOrder) {
     auto first = stalled.sock.readChunk();
     ASSERT_TRUE(first);
     EXPECT_EQ(decodeMessageHeader(first->data()).type, MessageType::Message);
+}
+
+// The automatic loop count: one loop per core to begin with; another once every loop serves
+// 8 connections, at most two per core; every connection is served wherever it landed.
+TEST_F(TcpTest, AutomaticLoopCountGrowsWithConnectionsUpToTwoPerCore) {
+    scfg.eventLoops = 0;
+    start();  // the observer: 1 connection
+    const std::size_t cores = std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 4);
+    auto threads = [] {
+        std::size_t n = 0;
+        for (const auto& e : std::filesystem::directory_iterator("/proc/self/task")) {
+            (void)e;
+            ++n;
+        }
+        return n;
+    };
+    const std::size_t before = threads();
+    std::vector<std::unique_ptr<ClientConnection>> conns;
+    while (conns.size() + 1 < 8 * cores) conns.push_back(connect());
+    EXPECT_EQ(threads(), before) << "8 connections per loop fit the first loops";
+    conns.push_back(connect());  // 8 * cores + 1 connections
+    EXPECT_EQ(threads(), before + 1) << "one more loop";
+    while (conns.size() + 1 < 16 * cores + 8) conns.push_back(connect());
+    EXPECT_EQ(threads(), before + cores) << "at most two loops per core";
+    for (std::size_t k = 0; k < conns.size(); ++k) {
+        Buffer body = pattern(32, static_cast<unsigned>(k));
+        auto r = roundTrip(*conns[k], body);
+        EXPECT_EQ(r.body, body) << "connection " << k;
+    }
+    expectObserverWorks();
 }
 
 TEST_F(TcpTest, ResponseFromWorkerThread) {
