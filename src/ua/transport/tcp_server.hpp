@@ -3,7 +3,8 @@
 // MSG request to a ServiceHandler.
 //
 // Threading: connections are spread over a few event loops (ServerTransportConfig::
-// eventLoops, one per core by default), each a thread with an epoll set: it reads what its
+// eventLoops; by default one per core, and one more per core once every loop serves 8
+// connections), each a thread with an epoll set: it reads what its
 // ready connections received and hands all of it to the protocol under one acquisition of
 // the network lock, so with many busy clients one wake-up serves many requests and the
 // cost per request does not grow with the number of clients. A service thread (asio)
