@@ -682,17 +682,21 @@ void TcpServer::Impl::onAccepted(const asio::error_code& ec, tcp::socket socket)
     if (fd < 0) return;
     ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) | O_NONBLOCK);  // the loop never blocks on it
     // Another loop when every loop serves kConnectionsPerLoop (up to maxLoops; without a
-    // thread for it, the loops there are serve), then the loop with the fewest connections.
-    while (loops.size() < loopsWanted(activeConnections + 1)) {
+    // thread for it, the loops there are serve), then the loop with the fewest connections
+    // among the ones wanted now: after a burst of connections the extra loops keep theirs
+    // but get no new ones, so few connections are not spread thin again.
+    const std::size_t wanted = loopsWanted(activeConnections + 1);
+    while (loops.size() < wanted) {
         try {
             loops.push_back(std::make_unique<EventLoop>(*this));
         } catch (const std::exception&) {
             break;
         }
     }
+    const std::size_t inUse = std::min(wanted, loops.size());
     EventLoop* loop = loops.front().get();
-    for (auto& l : loops)
-        if (l->size() < loop->size()) loop = l.get();
+    for (std::size_t k = 1; k < inUse; ++k)
+        if (loops[k]->size() < loop->size()) loop = loops[k].get();
     auto c = std::make_shared<TcpServerConnection>(*this, fd, std::move(peer), reject);
     c->start(loop);
     if (!loop->add(c)) {
