@@ -118,8 +118,9 @@ struct TcpServer::Impl {
     // The automatic loop count (eventLoops 0): one per core, and up to one more per core,
     // started once every loop serves kConnectionsPerLoop connections. On a machine that the
     // server shares with busy processes (its clients on loopback, the cell's other servers)
-    // a loop waits for a CPU like any thread; more loops under many connections keep the
-    // server's share (measured: bench/README.md, "Load").
+    // a loop that waits for a CPU keeps collecting requests instead of sleeping and being
+    // woken for each: larger batches, fewer context switches per request (measured:
+    // bench/README.md, "Load"). With few connections extra loops would only split batches.
     static constexpr std::size_t kConnectionsPerLoop = 8;
     std::size_t loopsWanted(std::size_t connections) const;
     std::size_t baseLoops = 1;
@@ -681,8 +682,8 @@ void TcpServer::Impl::onAccepted(const asio::error_code& ec, tcp::socket socket)
     int fd = socket.release(ignored);
     if (fd < 0) return;
     ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) | O_NONBLOCK);  // the loop never blocks on it
-    // Another loop when every loop serves kConnectionsPerLoop (up to maxLoops; without a
-    // thread for it, the loops there are serve), then the loop with the fewest connections
+    // Another loop when every loop serves kConnectionsPerLoop (up to maxLoops; if its thread
+    // cannot start, the existing loops serve), then the loop with the fewest connections
     // among the ones wanted now: after a burst of connections the extra loops keep theirs
     // but get no new ones, so few connections are not spread thin again.
     const std::size_t wanted = loopsWanted(activeConnections + 1);
